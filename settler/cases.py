@@ -1,0 +1,424 @@
+"""Case files: TOML presets validated on load into typed, immutable records.
+
+A case is resolved in layers, later ones winning:
+
+1. the *property set* named by ``case.properties`` (``data/properties/<name>.toml``): slag, matte, feed and model
+   constants, each with its source;
+2. the *case file* (``data/cases/<name>.toml`` or any path): geometry, feeds, size limit, submodel switches;
+3. *overrides* ``section.key=value`` from the command line or from :func:`load_case`'s ``overrides``.
+
+The schema below is the one place where every key, its type, unit, allowed range and meaning are written; the
+README's case-file reference is generated from it (``settler cases --schema``). Values are SI throughout.
+Unknown keys, wrong types and out-of-range values raise :class:`CaseError` naming the key, the value and what is
+allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .physics import PROBABILITY_FORMS, cu2s_fraction_from_density, matte_density, slag_viscosity
+
+#: Folder of the property sets and case presets (override with the SETTLER_DATA environment variable).
+DATA_DIR = Path(os.environ.get("SETTLER_DATA", Path(__file__).resolve().parents[1] / "data"))
+
+
+class CaseError(ValueError):
+    """A case file, property set or override that cannot be accepted; the message says why."""
+
+
+@dataclass(frozen=True)
+class Field:
+    """One key of the schema: its type, unit, allowed values and meaning."""
+
+    kind: type
+    unit: str
+    doc: str
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive_minimum: bool = False
+    choices: tuple | None = None
+    length: int | None = None  # for list-valued keys
+    optional: bool = False  # may be absent (value None)
+
+    def allowed(self) -> str:
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        kind = {float: "a number", int: "an integer", bool: "true or false", str: "a string",
+                list: f"a list of {self.length} numbers"}[self.kind]
+        bounds = []
+        if self.minimum is not None:
+            bounds.append(("> " if self.exclusive_minimum else ">= ") + f"{self.minimum:g}")
+        if self.maximum is not None:
+            bounds.append(f"<= {self.maximum:g}")
+        return kind + (" " + " and ".join(bounds) if bounds else "")
+
+
+F, I, B, S, L = float, int, bool, str, list
+SCHEMA: dict[str, dict[str, Field]] = {
+    "case": {
+        "name": Field(S, "", "Short name of the case."),
+        "description": Field(S, "", "One line on what the case is."),
+        "properties": Field(S, "", "Property set in data/properties/ providing the defaults; without one, the case "
+                                  "file must give every key.", optional=True),
+    },
+    "geometry": {
+        "height": Field(F, "m", "Slag layer height h (z, gravity along -z).", 0.0, exclusive_minimum=True),
+        "width": Field(F, "m", "Box extent along x (a).", 0.0, exclusive_minimum=True),
+        "depth": Field(F, "m", "Box extent along y (a).", 0.0, exclusive_minimum=True),
+        "inlet_diameter": Field(F, "m", "Diameter of the feed disk on the top surface.", 0.0,
+                                exclusive_minimum=True),
+        "inlet_center": Field(L, "m", "(x, y) of the inlet centre on the top surface; default the middle.",
+                              length=2, optional=True),
+        "outlet_diameter": Field(F, "m", "Diameter of the side pressure outlet; 0 for none (closed box).", 0.0),
+        "outlet_height": Field(F, "m", "Height of the outlet centre above the bottom.", 0.0),
+        "outlet_side": Field(S, "", "Wall holding the outlet.", choices=("x-", "x+", "y-", "y+")),
+    },
+    "slag": {
+        "density": Field(F, "kg/m^3", "Slag density.", 0.0, exclusive_minimum=True),
+        "viscosity_reference": Field(F, "Pa s", "Slag dynamic viscosity at the reference temperature.", 0.0,
+                                     exclusive_minimum=True),
+        "reference_temperature": Field(F, "K", "Temperature of viscosity_reference.", 0.0,
+                                       exclusive_minimum=True),
+        "activation_energy": Field(F, "J/mol", "Arrhenius activation energy of the slag viscosity.", 0.0),
+        "temperature": Field(F, "K", "Slag temperature of the run.", 0.0, exclusive_minimum=True),
+        "feed_rate": Field(F, "kg/s", "Slag mass fed through the inlet (must leave through the outlet).", 0.0),
+    },
+    "matte": {
+        "density": Field(F, "kg/m^3", "Density of fed matte (with reactions: sets the feed Cu2S fraction by Eq. 4).",
+                         0.0, exclusive_minimum=True),
+        "viscosity": Field(F, "Pa s", "Matte dynamic viscosity (Hadamard-Rybczynski factor only).", 0.0,
+                           exclusive_minimum=True),
+        "interfacial_tension": Field(F, "N/m", "Matte-slag interfacial tension sigma (Weber number).", 0.0,
+                                     exclusive_minimum=True),
+    },
+    "feed": {
+        "mass_rate": Field(F, "kg/s", "Matte mass fed through the inlet.", 0.0),
+        "mean_diameter": Field(F, "m", "Mean fed droplet diameter d_mean.", 0.0, exclusive_minimum=True),
+        "scale_std": Field(F, "-", "Standard deviation of the scale factor s ~ Normal(1, std).", 0.0, 1.0),
+        "scale_min": Field(F, "-", "Lower truncation of s.", 0.0, 1.0, exclusive_minimum=True),
+        "scale_max": Field(F, "-", "Upper truncation of s.", 1.0),
+        "seed": Field(I, "-", "Seed of the feed's random numbers (reproducible runs).", 0),
+    },
+    "drag": {
+        "law": Field(S, "", "Single-droplet drag law.", choices=("stokes", "schiller_naumann")),
+        "fluid_drop": Field(B, "", "Apply the Hadamard-Rybczynski fluid-drop factor (off: rigid spheres, as the "
+                                   "seed paper)."),
+    },
+    "coalescence": {
+        "enabled": Field(B, "", "Coalescence submodel on or off."),
+        "size_limit": Field(F, "m", "Largest droplet a coalescence may create.", 0.0, exclusive_minimum=True),
+        "probability_form": Field(S, "", "Form of Eq. 2: seed paper's or Luo's square root.",
+                                  choices=tuple(PROBABILITY_FORMS)),
+        "psi": Field(F, "-", "Order-of-unity constant Psi of Eq. 2.", 0.0),
+        "virtual_mass": Field(F, "-", "Virtual-mass coefficient gamma of Eq. 2.", 0.0),
+        "threshold": Field(F, "-", "A colliding pair coalesces when P_c >= threshold.", 0.0, 1.0),
+        "growth_target": Field(F, "-", "Marked droplets grow until this fraction of the merged size.", 0.0, 1.0,
+                               exclusive_minimum=True),
+    },
+    "reaction": {
+        "enabled": Field(B, "", "Reaction submodel (FeS removal: droplets shrink and densify) on or off."),
+        "end_state": Field(S, "", "X_inf of the reaction fit: 'fixed' uses x_final, 'equilibrium' computes it "
+                                  "with Cantera (settler.thermo).", choices=("fixed", "equilibrium")),
+        "x_final": Field(F, "-", "End-state Cu2S mole fraction X_inf when end_state = 'fixed'.", 0.0, 1.0,
+                         exclusive_minimum=True),
+        "time_constant": Field(F, "s", "Time constant tau of X(age) = X_inf - (X_inf - X0) exp(-age/tau).", 0.0,
+                               exclusive_minimum=True),
+        "oxygen_pressure": Field(F, "Pa", "Oxygen partial pressure for end_state = 'equilibrium'.", 0.0,
+                                 exclusive_minimum=True),
+        "so2_pressure": Field(F, "Pa", "SO2 partial pressure for end_state = 'equilibrium'.", 0.0,
+                              exclusive_minimum=True),
+        "feo_activity": Field(F, "-", "FeO activity in the slag for end_state = 'equilibrium'.", 0.0, 1.0,
+                              exclusive_minimum=True),
+    },
+}
+del F, I, B, S, L
+
+
+def _record_class(section: str, fields: dict[str, Field]):
+    return dataclasses.make_dataclass(
+        section.capitalize(), [(k, Any) for k in fields], frozen=True,
+        namespace={"__doc__": f"Validated [{section}] section; keys and units in settler.cases.SCHEMA."})
+
+
+RECORDS = {section: _record_class(section, fields) for section, fields in SCHEMA.items()}
+
+
+@dataclass(frozen=True)
+class Case:
+    """A resolved, validated case. Sections are records with the keys of :data:`SCHEMA` (SI units)."""
+
+    case: Any
+    geometry: Any
+    slag: Any
+    matte: Any
+    feed: Any
+    drag: Any
+    coalescence: Any
+    reaction: Any
+    source: str = ""
+
+    # Derived properties: computed in one place so every engine sees the same numbers.
+    @property
+    def slag_viscosity(self) -> float:
+        """Slag viscosity at the run temperature, Arrhenius law [Pa s]."""
+        s = self.slag
+        return slag_viscosity(s.temperature, s.viscosity_reference, s.reference_temperature, s.activation_energy)
+
+    @property
+    def x_initial(self) -> float:
+        """Cu2S mole fraction of the fed matte, from its density by Eq. 4 [-]."""
+        return cu2s_fraction_from_density(self.matte.density)
+
+    @property
+    def x_final(self) -> float:
+        """End state X_inf of the reaction fit [-] (fixed, or Cantera equilibrium)."""
+        r = self.reaction
+        if r.end_state == "fixed":
+            return r.x_final
+        from .thermo import equilibrium_grade  # Cantera is imported only when needed
+
+        return float(equilibrium_grade(self.slag.temperature, r.oxygen_pressure, p_so2=r.so2_pressure,
+                                       a_feo=r.feo_activity))
+
+    @property
+    def inlet_center(self) -> tuple[float, float]:
+        """(x, y) of the inlet centre [m]."""
+        g = self.geometry
+        if g.inlet_center is None:
+            return (0.5 * g.width, 0.5 * g.depth)
+        return tuple(g.inlet_center)
+
+    @property
+    def has_outlet(self) -> bool:
+        return self.geometry.outlet_diameter > 0.0
+
+    def to_dict(self) -> dict:
+        """Plain nested dict of the resolved values (what is written beside every output)."""
+        out = {}
+        for section in SCHEMA:
+            record = getattr(self, section)
+            out[section] = {k: v for k, v in dataclasses.asdict(record).items() if v is not None}
+        return out
+
+    def to_toml(self) -> str:
+        """The resolved case as TOML, with units as comments."""
+        lines = [f"# resolved case; loaded from {self.source}" if self.source else "# resolved case"]
+        for section, values in self.to_dict().items():
+            lines.append(f"\n[{section}]")
+            for key, value in values.items():
+                unit = SCHEMA[section][key].unit
+                lines.append(f"{key} = {_toml_value(value)}" + (f"  # [{unit}]" if unit and unit != "-" else ""))
+        return "\n".join(lines) + "\n"
+
+    def replace(self, **overrides) -> "Case":
+        """A new validated case with ``section.key`` overrides applied (keyword form: section__key=value)."""
+        return resolve(self.to_dict(), {k.replace("__", "."): v for k, v in overrides.items()}, self.source)
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(value)
+
+
+# ----------------------------------------------------------------------------------------------------------- loading
+def list_presets() -> list[str]:
+    """Names of the case presets shipped in data/cases/."""
+    return sorted(p.stem for p in (DATA_DIR / "cases").glob("*.toml"))
+
+
+def _read_toml(path: Path, what: str) -> dict:
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise CaseError(f"{what} file {path} does not exist") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CaseError(f"{what} file {path} is not valid TOML: {exc}") from None
+
+
+def case_path(name_or_path: str | os.PathLike) -> Path:
+    """Path of a preset name (``simple``) or of a case file path."""
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or p.exists():
+        return p
+    preset = DATA_DIR / "cases" / f"{name_or_path}.toml"
+    if not preset.exists():
+        raise CaseError(f"case {str(name_or_path)!r} is neither a file nor a preset; presets: "
+                        + ", ".join(list_presets()))
+    return preset
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Split ``section.key=value``; the value is read as TOML (``0.3``, ``true``, ``[0.1, 0.1]``) or else a string."""
+    if "=" not in text:
+        raise CaseError(f"override {text!r} is not of the form section.key=value")
+    key, raw = (t.strip() for t in text.split("=", 1))
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key, value
+
+
+def load_case(name_or_path: str | os.PathLike, overrides: dict[str, Any] | list[str] | None = None) -> Case:
+    """Load, merge and validate a case.
+
+    name_or_path: a preset name (``cubic``, ``simple``, ``deep``, ...) or a path to a TOML case file.
+    overrides: ``{"slag.viscosity_reference": 0.3}`` or a list of ``"section.key=value"`` strings.
+    """
+    path = case_path(name_or_path)
+    raw = _read_toml(path, "case")
+    return resolve(raw, overrides, str(path))
+
+
+def resolve(raw: dict, overrides=None, source: str = "") -> Case:
+    """Merge a raw case dict over its property set, apply overrides and validate."""
+    if isinstance(overrides, (list, tuple)):
+        overrides = dict(parse_override(o) for o in overrides)
+    overrides = dict(overrides or {})
+    prop_name = overrides.get("case.properties", raw.get("case", {}).get("properties"))
+    merged: dict[str, dict] = {}
+    if prop_name is not None:
+        if not isinstance(prop_name, str):
+            raise CaseError(f"case.properties = {prop_name!r}: allowed: a property-set name, one of "
+                            + ", ".join(sorted(p.stem for p in (DATA_DIR / "properties").glob("*.toml"))))
+        ppath = DATA_DIR / "properties" / f"{prop_name}.toml"
+        if not ppath.exists():
+            raise CaseError(f"case.properties = {prop_name!r}: no property set {ppath}; available: "
+                            + ", ".join(sorted(p.stem for p in (DATA_DIR / "properties").glob("*.toml"))))
+        _merge(merged, _read_toml(ppath, "property set"), f"property set {prop_name}")
+    _merge(merged, raw, source or "case")
+    for key, value in overrides.items():
+        section, _, name = key.partition(".")
+        if not name:
+            raise CaseError(f"override {key!r}: give section.key, e.g. slag.viscosity_reference=0.3")
+        _check_known(section, name, f"override {key}")
+        merged.setdefault(section, {})[name] = value
+    return _validate(merged, source)
+
+
+def _check_known(section: str, key: str | None, where: str):
+    if section not in SCHEMA:
+        raise CaseError(f"{where}: unknown section [{section}]; allowed sections: " + ", ".join(SCHEMA))
+    if key is not None and key not in SCHEMA[section]:
+        raise CaseError(f"{where}: unknown key {section}.{key}; allowed keys in [{section}]: "
+                        + ", ".join(SCHEMA[section]))
+
+
+def _merge(into: dict, layer: dict, where: str):
+    for section, values in layer.items():
+        if not isinstance(values, dict):
+            raise CaseError(f"{where}: top-level key {section!r} must be a [section] table; allowed sections: "
+                            + ", ".join(SCHEMA))
+        _check_known(section, None, where)
+        for key, value in values.items():
+            _check_known(section, key, where)
+            into.setdefault(section, {})[key] = value
+
+
+def _coerce(section: str, key: str, field: Field, value):
+    name = f"{section}.{key}"
+    if value is None:
+        if field.optional:
+            return None
+        raise CaseError(f"{name} is missing: allowed: {field.allowed()} [{field.unit}] ({field.doc})")
+    if field.kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise CaseError(f"{name} = {value!r}: wrong type, allowed: {field.allowed()}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise CaseError(f"{name} = {value!r}: must be finite, allowed: {field.allowed()}")
+    elif field.kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise CaseError(f"{name} = {value!r}: wrong type, allowed: {field.allowed()}")
+    elif field.kind is bool:
+        if not isinstance(value, bool):
+            raise CaseError(f"{name} = {value!r}: wrong type, allowed: {field.allowed()}")
+    elif field.kind is str:
+        if not isinstance(value, str):
+            raise CaseError(f"{name} = {value!r}: wrong type, allowed: {field.allowed()}")
+    elif field.kind is list:
+        if (not isinstance(value, (list, tuple)) or len(value) != field.length
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            raise CaseError(f"{name} = {value!r}: allowed: {field.allowed()}")
+        value = [float(v) for v in value]
+    if field.choices is not None and value not in field.choices:
+        raise CaseError(f"{name} = {value!r}: allowed: {field.allowed()}")
+    if field.kind in (float, int):
+        low_bad = field.minimum is not None and (
+            value <= field.minimum if field.exclusive_minimum else value < field.minimum)
+        high_bad = field.maximum is not None and value > field.maximum
+        if low_bad or high_bad:
+            raise CaseError(f"{name} = {value!r} {field.unit}: out of range, allowed: {field.allowed()}")
+    return value
+
+
+def _validate(merged: dict, source: str) -> Case:
+    sections = {}
+    for section, fields in SCHEMA.items():
+        values = merged.get(section, {})
+        coerced = {k: _coerce(section, k, f, values.get(k)) for k, f in fields.items()}
+        sections[section] = RECORDS[section](**coerced)
+    case = Case(**sections, source=source)
+    _check_consistency(case)
+    return case
+
+
+def _fail(key: str, value, allowed: str):
+    raise CaseError(f"{key} = {value!r}: {allowed}")
+
+
+def _check_consistency(case: Case):
+    """Checks that involve several keys."""
+    g, f = case.geometry, case.feed
+    cx, cy = case.inlet_center
+    r_in = 0.5 * g.inlet_diameter
+    if not (r_in <= cx <= g.width - r_in and r_in <= cy <= g.depth - r_in):
+        _fail("geometry.inlet_center" if g.inlet_center is not None else "geometry.inlet_diameter",
+              list(g.inlet_center) if g.inlet_center is not None else g.inlet_diameter,
+              f"the inlet disk (diameter {g.inlet_diameter:g} m centred at ({cx:g}, {cy:g}) m) must lie inside "
+              f"the top face {g.width:g} x {g.depth:g} m")
+    if g.outlet_diameter > 0.0:
+        r_out = 0.5 * g.outlet_diameter
+        wall_width = g.depth if g.outlet_side in ("x-", "x+") else g.width
+        if g.outlet_diameter > min(wall_width, g.height):
+            _fail("geometry.outlet_diameter", g.outlet_diameter,
+                  f"must fit the {g.outlet_side} wall ({wall_width:g} x {g.height:g} m), allowed "
+                  f"<= {min(wall_width, g.height):g} m")
+        if not (r_out <= g.outlet_height <= g.height - r_out):
+            _fail("geometry.outlet_height", g.outlet_height,
+                  f"the outlet (diameter {g.outlet_diameter:g} m) must lie inside the side wall: allowed "
+                  f"{r_out:g} <= outlet_height <= {g.height - r_out:g} m")
+    elif case.slag.feed_rate > 0.0:
+        _fail("slag.feed_rate", case.slag.feed_rate,
+              "a closed box (geometry.outlet_diameter = 0) cannot take a slag feed: allowed 0, or give an outlet")
+    if case.matte.density <= case.slag.density:
+        _fail("matte.density", case.matte.density,
+              f"must exceed slag.density = {case.slag.density:g} kg/m^3 for droplets to settle")
+    if not f.scale_min <= 1.0 <= f.scale_max:
+        _fail("feed.scale_min", f.scale_min, f"allowed scale_min <= 1 <= scale_max (scale_max = {f.scale_max:g})")
+    largest_fed = f.mean_diameter * f.scale_max
+    if case.coalescence.enabled and case.coalescence.size_limit < largest_fed:
+        _fail("coalescence.size_limit", case.coalescence.size_limit,
+              f"must be at least the largest fed droplet, feed.mean_diameter x feed.scale_max = {largest_fed:g} m")
+    if case.reaction.enabled:
+        x0 = case.x_initial
+        if not 0.0 < x0 < 1.0:
+            _fail("matte.density", case.matte.density,
+                  f"with reactions on, it sets the Cu2S fraction by Eq. 4, which needs "
+                  f"{matte_density(0.0):g} < density < {matte_density(1.0):g} kg/m^3")
+        if case.reaction.end_state == "fixed" and not x0 < case.reaction.x_final <= 1.0:
+            _fail("reaction.x_final", case.reaction.x_final,
+                  f"must exceed the feed's Cu2S fraction X0 = {x0:.4f} (from matte.density) and be <= 1")

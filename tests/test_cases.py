@@ -1,0 +1,140 @@
+"""Case loading: presets resolve, and every kind of bad input is refused with a message naming key, value, allowed."""
+
+import re
+from pathlib import Path
+
+import pytest
+
+from settler.cases import DATA_DIR, SCHEMA, CaseError, list_presets, load_case, parse_override, resolve
+
+
+def test_presets_load_with_paper_values():
+    assert {"cubic", "simple", "deep"} <= set(list_presets())
+    simple, cubic, deep = (load_case(n) for n in ("simple", "cubic", "deep"))
+    assert simple.geometry.height == 0.2 and simple.geometry.inlet_diameter == 0.15 and not simple.has_outlet
+    assert cubic.slag.feed_rate == 0.022 and cubic.geometry.outlet_diameter == 0.015
+    assert deep.geometry.height == 0.5 and deep.feed.mass_rate == 0.00015 and deep.reaction.enabled
+    assert simple.coalescence.size_limit == 1.5e-3 and cubic.coalescence.size_limit == 2e-3
+    assert deep.coalescence.size_limit == 40e-3
+    assert simple.slag_viscosity == pytest.approx(0.45, rel=1e-15)
+    assert deep.x_initial == pytest.approx(0.405, abs=5e-4)
+
+
+def test_overrides_from_strings_and_dict():
+    case = load_case("simple", ["slag.viscosity_reference=0.3", "coalescence.probability_form=luo",
+                                "geometry.inlet_center=[0.09, 0.1]"])
+    assert case.slag.viscosity_reference == 0.3
+    assert case.coalescence.probability_form == "luo"
+    assert case.inlet_center == (0.09, 0.1)
+    assert load_case("simple", {"feed.mass_rate": 1e-3}).feed.mass_rate == 1e-3
+    assert case.replace(slag__temperature=1500.0).slag_viscosity > 0.3
+    assert parse_override("a.b = true") == ("a.b", True)
+
+
+def test_resolved_case_roundtrips_through_toml(tmp_path):
+    case = load_case("deep")
+    path = tmp_path / "resolved.toml"
+    path.write_text(case.to_toml())
+    again = load_case(path)
+    assert again.to_dict() == case.to_dict()
+
+
+def _simple_raw():
+    import tomllib
+
+    return tomllib.loads((DATA_DIR / "cases" / "simple.toml").read_text())
+
+
+BAD = [
+    # (overrides, key named in the message, fragment of the allowed part)
+    ({"slag.viscosity_reference": -0.45}, "slag.viscosity_reference", "allowed: a number > 0"),
+    ({"slag.viscosity_reference": "thick"}, "slag.viscosity_reference", "wrong type"),
+    ({"slag.density": True}, "slag.density", "wrong type"),
+    ({"feed.seed": 1.5}, "feed.seed", "an integer"),
+    ({"coalescence.enabled": "yes"}, "coalescence.enabled", "true or false"),
+    ({"coalescence.probability_form": "fluent"}, "coalescence.probability_form", "one of 'seed', 'luo'"),
+    ({"coalescence.threshold": 1.5}, "coalescence.threshold", "<= 1"),
+    ({"coalescence.size_limit": 0.4e-3}, "coalescence.size_limit", "largest fed droplet"),
+    ({"geometry.outlet_diameter": 0.015, "geometry.outlet_height": 0.5}, "geometry.outlet_height",
+     "inside the side wall"),
+    ({"geometry.outlet_diameter": 0.3, "geometry.outlet_height": 0.1}, "geometry.outlet_diameter", "must fit"),
+    ({"geometry.inlet_diameter": 0.25}, "geometry.inlet_diameter", "inside the top face"),
+    ({"geometry.inlet_center": [0.02, 0.1]}, "geometry.inlet_center", "inside the top face"),
+    ({"geometry.inlet_center": [0.1]}, "geometry.inlet_center", "list of 2 numbers"),
+    ({"geometry.height": 0.0}, "geometry.height", "> 0"),
+    ({"slag.feed_rate": 0.01}, "slag.feed_rate", "closed box"),
+    ({"matte.density": 3000.0}, "matte.density", "must exceed slag.density"),
+    ({"feed.scale_min": 0.0}, "feed.scale_min", "> 0"),
+    ({"feed.scale_max": 0.9}, "feed.scale_max", ">= 1"),
+    ({"reaction.enabled": True, "reaction.x_final": 0.5}, "reaction.x_final", "must exceed the feed's Cu2S fraction"),
+    ({"reaction.enabled": True, "matte.density": 5400.0}, "matte.density", "Cu2S fraction by Eq. 4"),
+    ({"slag.temperature": float("nan")}, "slag.temperature", "finite"),
+]
+
+
+@pytest.mark.parametrize("overrides, key, allowed", BAD, ids=[b[1] + ":" + b[2][:12] for b in BAD])
+def test_bad_values_are_refused_clearly(overrides, key, allowed):
+    with pytest.raises(CaseError) as info:
+        resolve(_simple_raw(), overrides)
+    message = str(info.value)
+    assert key in message
+    assert allowed in message
+    value = overrides.get(key, next(iter(overrides.values())))
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value == value:
+        assert re.search(re.escape(repr(float(value) if isinstance(value, float) else value)), message) or \
+            f"{value:g}" in message
+
+
+def test_unknown_section_and_key():
+    raw = _simple_raw()
+    raw["slagg"] = {"density": 3000.0}
+    with pytest.raises(CaseError, match=r"unknown section \[slagg\]; allowed sections: case, geometry"):
+        resolve(raw)
+    raw = _simple_raw()
+    raw["slag"]["viscosty"] = 0.3
+    with pytest.raises(CaseError, match=r"unknown key slag.viscosty; allowed keys in \[slag\]: density"):
+        resolve(raw)
+    with pytest.raises(CaseError, match="unknown key feed.rate"):
+        load_case("simple", ["feed.rate=1"])
+    with pytest.raises(CaseError, match="section.key=value"):
+        load_case("simple", ["feed.mass_rate"])
+
+
+def test_missing_key_and_bad_property_set():
+    raw = _simple_raw()
+    raw["case"]["properties"] = "nonexistent"
+    with pytest.raises(CaseError, match="case.properties = 'nonexistent'.*available: flash_smelting"):
+        resolve(raw)
+    raw = _simple_raw()
+    del raw["case"]["properties"]
+    with pytest.raises(CaseError, match=r"slag.density is missing: allowed: a number > 0 \[kg/m\^3\]"):
+        resolve(raw)
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(CaseError, match="neither a file nor a preset; presets: cubic, deep, simple"):
+        load_case("no_such_case")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[geometry\nheight = 1")
+    with pytest.raises(CaseError, match="not valid TOML"):
+        load_case(bad)
+    bad.write_text("height = 1.0\n")
+    with pytest.raises(CaseError, match="must be a \\[section\\] table"):
+        load_case(bad)
+
+
+def test_every_schema_key_is_documented():
+    for section, fields in SCHEMA.items():
+        for key, field in fields.items():
+            assert field.doc, f"{section}.{key} has no documentation"
+
+
+SOURCE_TAG = re.compile(r"#.*\[(paper|lit|derived|chosen)\]")
+
+
+@pytest.mark.parametrize("path", sorted(Path(DATA_DIR).rglob("*.toml")), ids=lambda p: p.name)
+def test_every_number_in_data_carries_its_source(path):
+    """Developers' guide: every number in data/ carries its source or is marked as chosen."""
+    numeric = re.compile(r"^\s*\w+\s*=\s*[-+]?(\d|\.\d|\[)")
+    missing = [line for line in path.read_text().splitlines() if numeric.match(line) and not SOURCE_TAG.search(line)]
+    assert not missing, f"{path.name}: numbers without a source tag: {missing}"
