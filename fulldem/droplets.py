@@ -1,0 +1,148 @@
+"""Droplet state as a struct of arrays with capacity that grows by doubling.
+
+All arrays have the store's capacity as first dimension; entries ``[0:count]`` are the live droplets, kept
+contiguous (removal compacts, preserving order). Kernels receive the arrays and ``count``, never the store.
+
+Arrays and units:
+
+* ``position`` (cap, 3) [m] centre; ``velocity`` (cap, 3) [m/s];
+* ``diameter`` (cap,) [m] current diameter; ``density`` (cap,) [kg/m^3];
+* ``original_diameter`` (cap,) [m] diameter at the feed composition (Cu2S mass is proportional to its cube);
+* ``age`` (cap,) [s] time since feeding (reaction submodel);
+* ``flags`` (cap,) int32 bit flags (:data:`COALESCING`, ...); ``partner`` (cap,) int64 index of the coalescence
+  partner or -1; ``ident`` (cap,) int64 unique droplet number (never reused within a run).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: Flag bit: the droplet is marked for coalescence with ``partner`` (they no longer repel each other).
+COALESCING = 1
+
+FIELDS = {
+    "position": (3, np.float64),
+    "velocity": (3, np.float64),
+    "diameter": (None, np.float64),
+    "density": (None, np.float64),
+    "original_diameter": (None, np.float64),
+    "age": (None, np.float64),
+    "flags": (None, np.int32),
+    "partner": (None, np.int64),
+    "ident": (None, np.int64),
+}
+
+
+class DropletStore:
+    """Growable struct-of-arrays store of droplets (see module docstring for the arrays and units)."""
+
+    def __init__(self, capacity: int = 1024):
+        self.count = 0
+        self.next_ident = 0
+        self.capacity = max(int(capacity), 1)
+        for name, (width, dtype) in FIELDS.items():
+            shape = (self.capacity,) if width is None else (self.capacity, width)
+            setattr(self, name, np.zeros(shape, dtype=dtype))
+        self.partner[:] = -1
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Views of the live part of every array."""
+        return {name: getattr(self, name)[: self.count] for name in FIELDS}
+
+    def reserve(self, capacity: int) -> None:
+        """Ensure room for ``capacity`` droplets, doubling the arrays as often as needed."""
+        if capacity <= self.capacity:
+            return
+        new = self.capacity
+        while new < capacity:
+            new *= 2
+        for name, (width, dtype) in FIELDS.items():
+            old = getattr(self, name)
+            shape = (new,) if width is None else (new, width)
+            grown = np.zeros(shape, dtype=dtype)
+            grown[: self.count] = old[: self.count]
+            if name == "partner":
+                grown[self.count:] = -1
+            setattr(self, name, grown)
+        self.capacity = new
+
+    def add(self, position, diameter, density, velocity=None, original_diameter=None, age=None) -> slice:
+        """Append droplets; returns the slice of their indices. Arrays broadcast to (n, 3) / (n,)."""
+        position = np.atleast_2d(np.asarray(position, dtype=float))
+        n = position.shape[0]
+        start = self.count
+        self.reserve(start + n)
+        sl = slice(start, start + n)
+        self.position[sl] = position
+        self.velocity[sl] = 0.0 if velocity is None else velocity
+        self.diameter[sl] = diameter
+        self.density[sl] = density
+        self.original_diameter[sl] = diameter if original_diameter is None else original_diameter
+        self.age[sl] = 0.0 if age is None else age
+        self.flags[sl] = 0
+        self.partner[sl] = -1
+        self.ident[sl] = np.arange(self.next_ident, self.next_ident + n)
+        self.next_ident += n
+        self.count += n
+        return sl
+
+    def remove(self, mask: np.ndarray) -> None:
+        """Remove the live droplets where ``mask`` (length count) is true, keeping the others' order.
+
+        Coalescence partners are re-pointed to the droplets' new indices (a partner that is removed leaves -1).
+        """
+        keep = ~np.asarray(mask, dtype=bool)
+        if keep.all():
+            return
+        new_index = np.cumsum(keep) - 1
+        new_index[~keep] = -1
+        n = int(keep.sum())
+        partner = self.partner[: self.count].copy()
+        for name in FIELDS:
+            arr = getattr(self, name)
+            arr[:n] = arr[: self.count][keep]
+        valid = partner[keep] >= 0
+        remapped = np.full(n, -1, dtype=np.int64)
+        remapped[valid] = new_index[partner[keep][valid]]
+        self.partner[:n] = remapped
+        lost_partner = self.partner[:n] < 0
+        self.flags[:n][lost_partner] &= ~np.int32(COALESCING)
+        self.partner[n: self.count] = -1
+        self.count = n
+
+    def state(self) -> dict[str, np.ndarray | int]:
+        """Plain data for checkpoints: the live arrays plus counters."""
+        out = {k: v.copy() for k, v in self.arrays().items()}
+        out["next_ident"] = self.next_ident
+        return out
+
+    @classmethod
+    def from_state(cls, state: dict) -> "DropletStore":
+        """Rebuild a store from :meth:`state`."""
+        n = len(state["diameter"])
+        store = cls(max(2 * n, 1024))
+        for name in FIELDS:
+            getattr(store, name)[:n] = state[name]
+        store.count = n
+        store.next_ident = int(state["next_ident"])
+        return store
+
+    def volume(self) -> np.ndarray:
+        """Volumes of the live droplets [m^3]."""
+        return np.pi / 6.0 * self.diameter[: self.count] ** 3
+
+    def mass(self) -> np.ndarray:
+        """Masses of the live droplets [kg]."""
+        return self.density[: self.count] * self.volume()
+
+
+@njit(cache=True)
+def total_momentum(velocity, diameter, density, count):
+    """Total momentum of droplets [kg m/s] (3,)."""
+    out = np.zeros(3)
+    for p in range(count):
+        m = density[p] * np.pi / 6.0 * diameter[p] ** 3
+        for a in range(3):
+            out[a] += m * velocity[p, a]
+    return out
