@@ -145,6 +145,16 @@ def derived_numbers(case: Case) -> dict[str, list[Quantity]]:
             Quantity("end-state relative diameter", relative_diameter(xf, x0), "-", "Cu2S kept, FeS removed (Eq. 5)"),
             Quantity("time constant", case.reaction.time_constant, "s", "chosen unless sourced"),
         ]
+        from .thermo import equilibrium_grade, mass_fraction_cu
+
+        r = case.reaction
+        x_eq = float(equilibrium_grade(s.temperature, r.oxygen_pressure, p_so2=r.so2_pressure, a_feo=r.feo_activity))
+        groups["reaction"] += [
+            Quantity("Cantera equilibrium X_inf at run T, pO2", x_eq, "-",
+                     f"ideal mixing (qualitative); pO2 = {r.oxygen_pressure:g} Pa, pSO2 = {r.so2_pressure:g} Pa, "
+                     f"a_FeO = {r.feo_activity:g}"),
+            Quantity("matte grade at X_inf", 100.0 * float(mass_fraction_cu(xf)), "wt% Cu", ""),
+        ]
     return groups
 
 
