@@ -137,6 +137,34 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "feo_activity": Field(F, "-", "FeO activity in the slag for end_state = 'equilibrium'.", 0.0, 1.0,
                               exclusive_minimum=True),
     },
+    "fulldem": {
+        "cell_size": Field(F, "m", "Fluid grid spacing (cubic cells; must divide the box).", 0.0,
+                           exclusive_minimum=True),
+        "fluid_step": Field(F, "s", "Fluid (CFD) time step; DEM sub-steps fill it.", 0.0, exclusive_minimum=True),
+        "dem_step": Field(F, "s", "DEM time step; 0 chooses it from the contact time (contact_steps per contact).",
+                          0.0),
+        "contact_steps": Field(I, "-", "DEM steps per contact duration when dem_step = 0.", 5),
+        "max_overlap": Field(F, "-", "Overlap target / smaller diameter that sets the contact stiffness.", 0.0, 0.2,
+                             exclusive_minimum=True),
+        "load_factor": Field(F, "-", "Buoyant droplet weights one contact must carry at max_overlap.", 0.0,
+                             exclusive_minimum=True),
+        "restitution": Field(F, "-", "Normal restitution coefficient of droplet contacts (sets the damping).", 0.0,
+                             1.0, exclusive_minimum=True),
+        "sigma_cells": Field(F, "-", "Smoothing-kernel width in cells (lower bound of sigma).", 0.0,
+                             exclusive_minimum=True),
+        "sigma_diameter": Field(F, "-", "Smoothing-kernel width in droplet diameters (sigma grows with size).", 0.0),
+        "hindrance": Field(S, "", "Void-fraction correction of the drag.", choices=("di_felice", "none")),
+        "self_correction": Field(B, "", "Remove the droplet's own disturbance from the interpolated velocity."),
+        "advection": Field(B, "", "Fluid inertia (advection) on; off gives unsteady Stokes flow."),
+        "end_time": Field(F, "s", "Simulated time at which the run stops.", 0.0, exclusive_minimum=True),
+        "output_interval": Field(F, "s", "Simulated time between time-series rows.", 0.0, exclusive_minimum=True),
+        "snapshot_interval": Field(F, "s", "Simulated time between ParaView snapshots; 0 for none.", 0.0),
+        "checkpoint_interval": Field(F, "s", "Wall-clock time between checkpoints.", 0.0, exclusive_minimum=True),
+        "insertion_layer": Field(F, "m", "Thickness of the layer under the inlet where droplets are inserted.", 0.0),
+        "insertion_tries": Field(I, "-", "Random positions tried per fed droplet before it waits a step.", 1),
+        "overlap_abort": Field(F, "-", "Overlap / smaller diameter beyond which the run stops (blow-up).", 0.0,
+                               exclusive_minimum=True),
+    },
 }
 del F, I, B, S, L
 
@@ -162,6 +190,7 @@ class Case:
     drag: Any
     coalescence: Any
     reaction: Any
+    fulldem: Any
     source: str = ""
 
     # Derived properties: computed in one place so every engine sees the same numbers.
