@@ -467,29 +467,30 @@ def momentum_rhs_kernel(component, vel, flux_x, flux_y, flux_z, nx, ny, nz, spac
     if scheme == 5:
         return
     flux_c = flux_x if c == 0 else (flux_y if c == 1 else flux_z)
-    lo = (lo0, lo1, lo2)
-    n = (nx, ny, nz)
-    periodic = (px, py, pz)
+    inv_h = 1.0 / spacing
     for d in range(3):
         flux_d = flux_x if d == 0 else (flux_y if d == 1 else flux_z)
-        start = [lo0, lo1, lo2]
-        stop = [nx, ny, nz]
-        if d == c or periodic[d]:
-            start[d] = lo[d] - 1
-        else:  # the first and last control-volume faces lie on the walls, where u_c = 0: no flux
-            start[d] = 0
-            stop[d] = n[d] - 1
-        unit = [0, 0, 0]
-        unit[d] = 1
-        shift = [unit[0], unit[1], unit[2]]
-        carrier = flux_c
-        if d != c:
-            shift[c] -= 1
-            carrier = flux_d
+        di = 1 if d == 0 else 0
+        dj = 1 if d == 1 else 0
+        dk = 1 if d == 2 else 0
+        # Range of control volumes whose upper face (along d) carries a flux: from the lower face of the first
+        # free one; on a wall of axis d (d != c) the first and last faces lie on the wall, where u_c = 0.
+        wall_tangential = d != c and not (px if d == 0 else (py if d == 1 else pz))
+        s0, s1, s2 = lo0 - di, lo1 - dj, lo2 - dk
+        e0, e1, e2 = nx, ny, nz
+        if wall_tangential:
+            s0, s1, s2 = lo0, lo1, lo2
+            e0, e1, e2 = nx - di, ny - dj, nz - dk
+        # Carrier: mean of the face fluxes at offsets first and (di, dj, dk) from the control volume's index.
+        if d == c:
+            _advect_pass(out, vel, flux_c, 0, 0, 0, di, dj, dk, s0, s1, s2, e0, e1, e2, lo0, lo1, lo2, nx, ny, nz,
+                         scheme, inv_h)
         else:
-            shift[d] = 0
-        _advect_pass(out, vel, carrier, shift[0], shift[1], shift[2], unit[0], unit[1], unit[2], start[0],
-                     start[1], start[2], stop[0], stop[1], stop[2], lo0, lo1, lo2, nx, ny, nz, scheme, 1.0 / spacing)
+            f0 = di - (1 if c == 0 else 0)
+            f1 = dj - (1 if c == 1 else 0)
+            f2 = dk - (1 if c == 2 else 0)
+            _advect_pass(out, vel, flux_d, f0, f1, f2, di, dj, dk, s0, s1, s2, e0, e1, e2, lo0, lo1, lo2, nx, ny, nz,
+                         scheme, inv_h)
 
 
 @njit(cache=True)
