@@ -51,7 +51,7 @@ class Field:
         if self.choices is not None:
             return "one of " + ", ".join(repr(c) for c in self.choices)
         kind = {float: "a number", int: "an integer", bool: "true or false", str: "a string",
-                list: f"a list of {self.length} numbers"}[self.kind]
+                list: f"a list of {self.length} numbers" if self.length else "a non-empty list of numbers"}[self.kind]
         bounds = []
         if self.minimum is not None:
             bounds.append(("> " if self.exclusive_minimum else ">= ") + f"{self.minimum:g}")
@@ -105,6 +105,12 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "scale_min": Field(F, "-", "Lower truncation of s.", 0.0, 1.0, exclusive_minimum=True),
         "scale_max": Field(F, "-", "Upper truncation of s.", 1.0),
         "seed": Field(I, "-", "Seed of the feed's random numbers (reproducible runs).", 0),
+        "distribution": Field(S, "", "Feed size distribution: 'normal' (d_mean x truncated-normal scale factor) or "
+                                     "'table' (table_diameters with table_mass_fractions).",
+                              choices=("normal", "table")),
+        "table_diameters": Field(L, "m", "Fed droplet diameters of the 'table' distribution.", optional=True),
+        "table_mass_fractions": Field(L, "-", "Mass fraction of the matte feed at each table diameter (sum 1).",
+                                      optional=True),
     },
     "drag": {
         "law": Field(S, "", "Single-droplet drag law.", choices=("stokes", "schiller_naumann")),
@@ -165,6 +171,35 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "overlap_abort": Field(F, "-", "Overlap / smaller diameter beyond which the run stops (blow-up).", 0.0,
                                exclusive_minimum=True),
     },
+    "popbal": {
+        "slag_flow": Field(S, "", "Slag flow of the reduced model: 'vertical' (slag fed at the top leaves by the side "
+                                  "outlet: downflow and a sink in the outlet band) or 'horizontal' (the column rides "
+                                  "the settler's plug flow; what is suspended after the residence time is lost).",
+                           choices=("vertical", "horizontal")),
+        "end_time": Field(F, "s", "Simulated time at which the run stops (horizontal: at most the residence time).",
+                          0.0, exclusive_minimum=True),
+        "output_interval": Field(F, "s", "Simulated time between time-series rows and distribution snapshots.", 0.0,
+                                 exclusive_minimum=True),
+        "height_cells": Field(I, "-", "Finite-volume cells over the slag height.", 4),
+        "sections_per_doubling": Field(I, "-", "Sections per doubling of droplet volume (pivot ratio 2^(1/n)).", 1),
+        "time_step": Field(F, "s", "Largest time step.", 0.0, exclusive_minimum=True),
+        "max_courant": Field(F, "-", "Largest Courant number u dt/dz of any occupied section (implicit transport, so "
+                                     "it bounds accuracy, not stability).", 0.0, exclusive_minimum=True),
+        "hindered_exponent": Field(F, "-", "Richardson-Zaki exponent n of the hindered-settling factor (0: none).",
+                                   0.0),
+        "coalescence_rule": Field(S, "", "How P_c makes a collision a merger: 'step' (P_c >= coalescence.threshold, "
+                                         "the DEM rule) or 'probability' (with probability P_c).",
+                                  choices=("step", "probability")),
+        "collision_efficiency": Field(F, "-", "Collision efficiency multiplying the collision frequency.", 0.0),
+        "shear_coefficient": Field(F, "-", "Channel shear rate G in units of u_c / R_c (0: no shear collisions).",
+                                   0.0),
+        "channel_coefficient": Field(F, "-", "c_ch of the plume velocity u_c = c_ch phi drho g R_c^2 / mu (4/15: "
+                                             "Hadamard-Rybczynski cloud).", 0.0),
+        "channel_feed_fraction": Field(F, "-", "Fraction of the matte feed that enters the channel.", 0.0, 1.0),
+        "channel_radius_factor": Field(F, "-", "Channel radius R_c in inlet radii (0: no channel zone).", 0.0),
+        "feed_duration": Field(F, "s", "Matte feed stops after this time; absent: feeds for the whole run.", 0.0,
+                               exclusive_minimum=True, optional=True),
+    },
 }
 del F, I, B, S, L
 
@@ -191,6 +226,7 @@ class Case:
     coalescence: Any
     reaction: Any
     fulldem: Any
+    popbal: Any
     source: str = ""
 
     # Derived properties: computed in one place so every engine sees the same numbers.
@@ -379,7 +415,7 @@ def _coerce(section: str, key: str, field: Field, value):
         if not isinstance(value, str):
             raise CaseError(f"{name} = {value!r}: wrong type, allowed: {field.allowed()}")
     elif field.kind is list:
-        if (not isinstance(value, (list, tuple)) or len(value) != field.length
+        if (not isinstance(value, (list, tuple)) or len(value) != (field.length or len(value)) or not value
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
             raise CaseError(f"{name} = {value!r}: allowed: {field.allowed()}")
         value = [float(v) for v in value]
@@ -407,6 +443,19 @@ def _validate(merged: dict, source: str) -> Case:
 
 def _fail(key: str, value, allowed: str):
     raise CaseError(f"{key} = {value!r}: {allowed}")
+
+
+def _check_feed_table(f):
+    """The 'table' feed distribution: matching lists, positive diameters, fractions >= 0 summing to 1."""
+    if f.table_diameters is None or f.table_mass_fractions is None:
+        _fail("feed.distribution", f.distribution, "'table' needs feed.table_diameters and feed.table_mass_fractions")
+    if len(f.table_diameters) != len(f.table_mass_fractions):
+        _fail("feed.table_mass_fractions", f.table_mass_fractions,
+              f"needs one entry per feed.table_diameters entry ({len(f.table_diameters)})")
+    if min(f.table_diameters) <= 0.0:
+        _fail("feed.table_diameters", f.table_diameters, "allowed: diameters > 0 m")
+    if min(f.table_mass_fractions) < 0.0 or abs(sum(f.table_mass_fractions) - 1.0) > 1e-6:
+        _fail("feed.table_mass_fractions", f.table_mass_fractions, "allowed: fractions >= 0 that sum to 1 (+- 1e-6)")
 
 
 def _check_consistency(case: Case):
@@ -438,10 +487,14 @@ def _check_consistency(case: Case):
               f"must exceed slag.density = {case.slag.density:g} kg/m^3 for droplets to settle")
     if not f.scale_min <= 1.0 <= f.scale_max:
         _fail("feed.scale_min", f.scale_min, f"allowed scale_min <= 1 <= scale_max (scale_max = {f.scale_max:g})")
-    largest_fed = f.mean_diameter * f.scale_max
+    if f.distribution == "table":
+        _check_feed_table(f)
+        largest_fed, what = max(f.table_diameters), "max(feed.table_diameters)"
+    else:
+        largest_fed, what = f.mean_diameter * f.scale_max, "feed.mean_diameter x feed.scale_max"
     if case.coalescence.enabled and case.coalescence.size_limit < largest_fed:
         _fail("coalescence.size_limit", case.coalescence.size_limit,
-              f"must be at least the largest fed droplet, feed.mean_diameter x feed.scale_max = {largest_fed:g} m")
+              f"must be at least the largest fed droplet, {what} = {largest_fed:g} m")
     if case.reaction.enabled:
         x0 = case.x_initial
         if not 0.0 < x0 < 1.0:
