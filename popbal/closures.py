@@ -1,0 +1,66 @@
+"""Channeling closure: the collective velocity of the droplet plume under the inlet (two-zone model).
+
+Derivation. A spherical cloud of radius R holding droplets at volume fraction phi falls through the slag as a drop
+of suspension whose excess density is phi (rho_p - rho_s) and whose viscosity equals the slag's (viscosity ratio
+1). Its Hadamard-Rybczynski velocity is
+
+    U = (2/3) (phi drho g R^2 / mu) (1 + lam)/(2 + 3 lam),  lam = 1  ->  U = (4/15) phi drho g R^2 / mu,
+
+which, with N = phi R^3/a^3 droplets of radius a and U_St = (2/9) drho g a^2 / mu, is U = U_St (6/5) N a / R:
+the falling-cloud result of Nitsche & Batchelor (JFM 340, 1997) quoted in physics.md section 4. In shared-law
+form U = stokes_velocity(2R, rho_s + phi drho, rho_s, mu) * hadamard_rybczynski_factor(1) (checked in the tests).
+
+A continuous feed Q [m^3/s] of matte into a channel of radius R_c gives, by conservation of the volume flux, a
+channel volume fraction phi = Q / (pi R_c^2 u). With the cloud law u = c_ch phi drho g R_c^2 / mu the two close to
+
+    u_c = sqrt(c_ch Q drho g / (pi mu)),
+
+independent of R_c. For the seed paper's simple case (Q = 0.0086/5100 m^3/s, drho = 1950 kg/m^3, mu = 0.45 Pa s)
+u_c = 0.078 m/s and the plume Reynolds number rho_s u_c R_c / mu = 41 for R_c = 75 mm (about 80 on the diameter),
+inside the 10-1000 range physics.md section 4 expects. The reduced model applies the *local* form
+u_c(z) = c_ch g R_c^2 sum_k phi_k (rho_k - rho_s) / mu in every channel cell (popbal.kernels.cell_properties): it
+needs no steady state, lets the front of a starting plume advance as a shock, and relaxes to the expression above.
+
+Two-zone model. The slag column is split into a channel under the inlet (radius R_c = channel_radius_factor x the
+inlet radius) and the outer zone (the rest of the box cross-section). A fraction f_ch (channel_feed_fraction) of
+the matte feed enters the channel, where droplets move at u_c plus their own hindered settling velocity and collide
+by differential settling and by the plume's shear, G = shear_coefficient x u_c / R_c; the rest settles
+individually (hindered) in the outer zone, colliding by differential settling only. Parameters, all in the case's
+[popbal] section and all to be calibrated against the full engine: c_ch (channel_coefficient, default 4/15 from
+the cloud solution), f_ch, the radius factor, shear_coefficient and collision_efficiency.
+
+Not modelled (calibration will tell whether they matter): the return flow of slag in the outer zone and the
+exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel), the cloud's
+break-up, and inertia of the plume (Re > 1).
+"""
+
+from __future__ import annotations
+
+import math
+
+from settler.physics import STANDARD_GRAVITY
+
+#: Hadamard-Rybczynski coefficient of a cloud with viscosity ratio 1: U = (4/15) phi drho g R^2 / mu.
+CLOUD_COEFFICIENT = 4.0 / 15.0
+
+
+def cloud_velocity(volume_fraction, excess_density, radius, viscosity, coefficient=CLOUD_COEFFICIENT,
+                   gravity=STANDARD_GRAVITY):
+    """Velocity [m/s] of a cloud of radius [m] at volume fraction phi [-]: c phi drho g R^2 / mu."""
+    return coefficient * volume_fraction * excess_density * gravity * radius * radius / viscosity
+
+
+def steady_channel_velocity(volume_flux, excess_density, viscosity, coefficient=CLOUD_COEFFICIENT,
+                            gravity=STANDARD_GRAVITY):
+    """Self-consistent plume velocity u_c = sqrt(c Q drho g / (pi mu)) [m/s] for a matte feed Q [m^3/s]."""
+    return math.sqrt(coefficient * volume_flux * excess_density * gravity / (math.pi * viscosity))
+
+
+def steady_channel_fraction(volume_flux, radius, velocity):
+    """Matte volume fraction phi = Q / (pi R^2 u) [-] of a channel of radius [m] carrying Q [m^3/s] at u [m/s]."""
+    return volume_flux / (math.pi * radius * radius * velocity) if velocity > 0.0 else 0.0
+
+
+def plume_reynolds(velocity, radius, density_slag, viscosity):
+    """Plume Reynolds number rho_s u_c R_c / mu [-] (on the radius)."""
+    return density_slag * velocity * radius / viscosity

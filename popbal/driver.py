@@ -1,0 +1,313 @@
+"""Running the reduced model: the time loop, the bookkeeping and the result (time series + distributions).
+
+One step of length dt (operator splitting, first order):
+
+1. droplet properties of every cell from the state at the step start (popbal.kernels.cell_properties);
+2. dt = min(popbal.time_step, max_courant dz / fastest occupied section, time to the next output or feed change);
+3. transport in z with the feed at the top, the settled flux at the bottom and the outlet sink (implicit upwind);
+4. coalescence in every occupied cell (cell-average technique, Heun sub-steps);
+5. ageing and reaction (the shared reaction fit, exact over the step).
+
+Every amount that enters or leaves the slag is booked per section (fed, settled, lost) and the reaction's FeS
+removal as reacted, so fed = in slag + settled + lost + reacted holds to round-off.
+
+Outputs (:class:`Result`, written by :meth:`Result.save`):
+
+* ``timeseries.csv``: exactly the columns of settler.output.TIME_SERIES (NaN where the reduced model has none);
+* ``distribution.npz``: arrays listed in :data:`DISTRIBUTION_ARRAYS` with their units;
+* ``case.toml`` and ``metadata.json`` (settler.output.write_run_metadata) with the start-up numbers.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import sys
+import time as wallclock
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from settler.cases import Case
+from settler.output import atomic_write_bytes, time_series_frame, write_run_metadata, write_time_series
+
+from .kernels import (AGE, FES_REMOVED, NEGLIGIBLE_VOLUME_FRACTION, NUMBER, QUANTITIES, cell_properties,
+                      coalesce_zone, react_zone, transport_zone)
+from .model import CHANNEL, OUTER, ZONES, Model, setup
+
+#: Arrays of distribution.npz: name -> (unit, meaning). T outputs, Z = 2 zones, J cells, K sections.
+DISTRIBUTION_ARRAYS: dict[str, tuple[str, str]] = {
+    "time": ("s", "(T,) output times"),
+    "z": ("m", "(J,) cell-centre heights above the bottom of the slag"),
+    "zone_area": ("m^2", "(Z,) horizontal area of the channel and outer zones"),
+    "original_volume": ("m^3", "(K,) pivot volumes of the sections (droplet volume at the feed composition)"),
+    "original_diameter": ("m", "(K,) pivot diameters of the sections at the feed composition"),
+    "number_density": ("1/m^3", "(T, Z, J, K) droplets per m^3 of slag"),
+    "diameter": ("m", "(T, Z, J, K) actual droplet diameter after reaction (NaN where empty)"),
+    "mean_age": ("s", "(T, Z, J, K) volume-weighted mean droplet age (NaN where empty)"),
+    "fed_number": ("-", "(T, K) droplets fed since t = 0, per section"),
+    "settled_number": ("-", "(T, K) droplets that reached the bottom since t = 0, per section"),
+    "lost_number": ("-", "(T, K) droplets that left with the slag since t = 0, per section"),
+    "fed_mass": ("kg", "(T, K) matte mass fed since t = 0, per section"),
+    "settled_mass": ("kg", "(T, K) matte mass settled since t = 0, per section"),
+    "lost_mass": ("kg", "(T, K) matte mass lost with the slag since t = 0, per section"),
+}
+
+
+@dataclass
+class Result:
+    """A finished reduced-model run. Arrays as in :data:`DISTRIBUTION_ARRAYS`; ``timeseries`` a DataFrame with the
+    columns of settler.output.TIME_SERIES."""
+
+    model: Model
+    timeseries: pd.DataFrame
+    arrays: dict[str, np.ndarray]
+    wall_time: float
+    steps: int
+    coalescence_substeps: int = 0
+    numbers: list = field(default_factory=list)
+
+    def __getattr__(self, name):
+        arrays = self.__dict__.get("arrays", {})
+        if name in arrays:
+            return arrays[name]
+        raise AttributeError(name)
+
+    @property
+    def case(self) -> Case:
+        return self.model.case
+
+    def size_distribution(self, time: float | None = None) -> pd.DataFrame:
+        """Long table (zone, z, original_diameter, diameter, number_density, mean_age) at the output nearest ``time``
+        (default: the last)."""
+        t = self.arrays["time"]
+        n = len(t) - 1 if time is None else int(np.argmin(np.abs(t - time)))
+        zone, j, k = np.meshgrid(np.arange(len(ZONES)), np.arange(self.model.cells), np.arange(self.model.grid.size),
+                                 indexing="ij")
+        return pd.DataFrame({
+            "time": t[n], "zone": np.array(ZONES)[zone.ravel()], "z": self.arrays["z"][j.ravel()],
+            "original_diameter": self.arrays["original_diameter"][k.ravel()],
+            "diameter": self.arrays["diameter"][n].ravel(), "number_density": self.arrays["number_density"][n].ravel(),
+            "mean_age": self.arrays["mean_age"][n].ravel()})
+
+    def loss_by_size(self) -> pd.DataFrame:
+        """Per section at the last output: fed, settled and lost mass and the lost / fed fraction (NaN where none
+        was fed). Without coalescence this is the loss fraction vs droplet size."""
+        fed, lost, settled = (self.arrays[k][-1] for k in ("fed_mass", "lost_mass", "settled_mass"))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            fraction = np.where(fed > 0.0, lost / fed, np.nan)
+        return pd.DataFrame({"original_diameter": self.arrays["original_diameter"], "fed_mass": fed,
+                             "settled_mass": settled, "lost_mass": lost, "loss_fraction": fraction})
+
+    def save(self, out_dir: str | os.PathLike) -> Path:
+        """Write timeseries.csv, distribution.npz, case.toml and metadata.json into out_dir (atomically)."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        write_time_series(self.timeseries, out / "timeseries.csv")
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **self.arrays)
+        atomic_write_bytes(out / "distribution.npz", buffer.getvalue())
+        write_run_metadata(out, self.case, "popbal", wall_time=self.wall_time, steps=self.steps,
+                           distribution_arrays={k: {"unit": u, "meaning": m} for k, (u, m) in
+                                                DISTRIBUTION_ARRAYS.items()},
+                           zones=list(ZONES),
+                           start_up={q.name: {"value": q.value, "unit": q.unit, "note": q.note} for q in self.numbers})
+        return out
+
+
+class _Work:
+    """Per-zone property arrays and coalescence work space, allocated once per run."""
+
+    def __init__(self, cells: int, sections: int):
+        shape = (len(ZONES), cells, sections)
+        self.diameters = np.zeros(shape)
+        self.densities = np.zeros(shape)
+        self.velocities = np.zeros(shape)
+        self.volume_fraction = np.zeros((len(ZONES), cells))
+        self.collective = np.zeros((len(ZONES), cells))
+        self.shear = np.zeros((len(ZONES), cells))
+        self.beta = np.zeros((sections, sections))
+        self.births = np.zeros((QUANTITIES + 1, sections))
+        self.k1 = np.zeros((QUANTITIES, sections))
+        self.k2 = np.zeros((QUANTITIES, sections))
+        self.trial = np.zeros((QUANTITIES, sections))
+        self.top_source = np.zeros((QUANTITIES, sections))
+        self.bottom_out = np.zeros((QUANTITIES, sections))
+        self.sink_out = np.zeros((QUANTITIES, sections))
+
+
+def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
+    p = model.parameters
+    channel = zone == CHANNEL
+    cell_properties(content[zone], model.grid.pivots, model.grid.diameters, model.reacting, model.x_initial,
+                    model.x_final, model.time_constant, model.velocity_table, model.age_step,
+                    p["hindered_exponent"], model.feed_density, p["density_slag"], model.viscosity, model.gravity,
+                    p["channel_coefficient"] if channel else 0.0, model.channel_radius if channel else 0.0,
+                    model.downflow, work.diameters[zone], work.densities[zone], work.velocities[zone],
+                    work.volume_fraction[zone], work.collective[zone])
+    if channel and model.channel_radius > 0.0:
+        work.shear[zone] = p["shear_coefficient"] * work.collective[zone] / model.channel_radius
+    else:
+        work.shear[zone] = 0.0
+
+
+class _Books:
+    """Cumulative amounts per section [absolute: droplets, m^3 x droplets, kg] and reacted FeS [kg]."""
+
+    def __init__(self, sections: int):
+        self.fed = np.zeros((QUANTITIES, sections))
+        self.settled = np.zeros((QUANTITIES, sections))
+        self.lost = np.zeros((QUANTITIES, sections))
+        self.reacted = 0.0
+
+
+def _mass(model: Model, amounts: np.ndarray) -> np.ndarray:
+    """Matte mass per section [kg] of amounts (Q, K) (or (..., Q, K)): rho_0 x_k N - FeS removed."""
+    return model.feed_density * model.grid.pivots * amounts[..., NUMBER, :] - amounts[..., FES_REMOVED, :]
+
+
+def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: float):
+    """A time-series row and the distribution arrays at time t (properties must be current)."""
+    volume = model.zone_area[:, None] * model.cell_height  # (Z, 1) cell volume per zone
+    number = content[:, :, NUMBER, :]  # (Z, J, K)
+    weights = number * volume[:, :, None]
+    count = weights.sum()
+    d = work.diameters
+    in_slag = float((_mass(model, content) * volume[:, :, None]).sum())
+    row = {"time": t, "droplet_count": count, "mass_in_slag": in_slag}
+    if count > 0.0:
+        row["mean_diameter"] = (weights * d).sum() / count
+        row["sauter_diameter"] = (weights * d**3).sum() / (weights * d**2).sum()
+        row["mean_settling_velocity"] = (weights * work.velocities).sum() / count
+    # centreline: droplets within one inlet radius of the axis, in the cell(s) at mid-height
+    height = model.case.geometry.height
+    mid = np.flatnonzero(np.abs(model.z - 0.5 * height) <= 0.5 * model.cell_height + 1e-12 * height)
+    inside = math.pi * min(model.channel_radius, model.inlet_radius) ** 2
+    area_in = np.array([inside, max(math.pi * model.inlet_radius**2 - inside, 0.0)])
+    w_mid = number[:, mid, :] * area_in[:, None, None]
+    if w_mid.sum() > 0.0:
+        row["centreline_settling_velocity"] = (w_mid * work.velocities[:, mid, :]).sum() / w_mid.sum()
+    fed = float(_mass(model, books.fed).sum())
+    settled = float(_mass(model, books.settled).sum())
+    lost = float(_mass(model, books.lost).sum())
+    row.update(mass_fed=fed, mass_settled=settled, mass_lost=lost, mass_reacted=books.reacted,
+               mass_balance_error=(fed - in_slag - settled - lost - books.reacted) / max(fed, 1e-300))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        occupied = number > 0.0
+        mean_age = np.where(occupied, content[:, :, AGE, :] / (number * model.grid.pivots), np.nan)
+        diameter = np.where(occupied, d, np.nan)
+    arrays = {"number_density": number.copy(), "diameter": diameter, "mean_age": mean_age,
+              "fed_number": books.fed[NUMBER].copy(), "settled_number": books.settled[NUMBER].copy(),
+              "lost_number": books.lost[NUMBER].copy(), "fed_mass": _mass(model, books.fed),
+              "settled_mass": _mass(model, books.settled), "lost_mass": _mass(model, books.lost)}
+    return row, arrays
+
+
+def run(model: Model | Case | str, end_time: float | None = None, output_interval: float | None = None,
+        progress: bool | None = None, progress_interval: float = 2.0, stream=None, **overrides) -> Result:
+    """Run the reduced model and return a :class:`Result`.
+
+    model: a :class:`Model` from :func:`popbal.setup`, a case, or a preset name / path (then ``overrides`` as in
+    setup). end_time, output_interval [s] override popbal.end_time / popbal.output_interval. progress: print a
+    progress line to ``stream`` (stderr) every progress_interval seconds of wall time; default on for runs expected
+    to take long (more than 10 000 steps at the largest step).
+    """
+    if not isinstance(model, Model):
+        model = setup(model, **overrides)
+    elif overrides:
+        raise TypeError("run: overrides apply when a case is given; pass them to popbal.setup for a Model")
+    p = model.parameters
+    stop = model.stop_time if end_time is None else (min(end_time, model.residence_time) if model.horizontal
+                                                      else end_time)
+    if not stop > 0.0:
+        raise ValueError(f"run: end_time = {end_time!r} s, allowed > 0")
+    interval = p["output_interval"] if output_interval is None else output_interval
+    if not interval > 0.0:
+        raise ValueError(f"run: output_interval = {output_interval!r} s, allowed > 0")
+    if progress is None:
+        progress = stop / p["time_step"] > 10_000
+    stream = stream or sys.stderr
+    grid, cells, dz = model.grid, model.cells, model.cell_height
+    content = np.zeros((len(ZONES), cells, QUANTITIES, grid.size))
+    work = _Work(cells, grid.size)
+    books = _Books(grid.size)
+    zones = [z for z in (CHANNEL, OUTER) if model.zone_area[z] > 0.0]
+    numbers = model.numbers()
+    if progress:
+        print(f"popbal {model.name}: " + "; ".join(f"{q.name} {q.value:.4g} {q.unit}" for q in numbers), file=stream)
+
+    rows, snapshots = [], []
+    started = wallclock.perf_counter()
+    last_report = started
+    t, steps, most_substeps = 0.0, 0, 0
+    outputs = np.append(np.arange(0.0, stop, interval), stop)
+    outputs = outputs[np.concatenate([[True], np.diff(outputs) > 1e-9 * stop])]
+    next_output = 0
+    tiny = 1e-12 * stop
+    while True:
+        for zone in zones:
+            _properties(model, content, work, zone)
+        if next_output < outputs.size and t >= outputs[next_output] - tiny:
+            row, arrays = _snapshot(model, content, work, books, t)
+            rows.append(row)
+            snapshots.append(arrays)
+            next_output += 1
+        if t >= stop - tiny:
+            break
+        occupied = content[:, :, NUMBER, :] * grid.pivots >= NEGLIGIBLE_VOLUME_FRACTION
+        fastest = work.velocities[occupied].max() if occupied.any() else 0.0
+        dt = min(p["time_step"], outputs[next_output] - t)
+        if fastest > 0.0:
+            dt = min(dt, p["max_courant"] * dz / fastest)
+        feeding = t < model.feed_end - tiny
+        if feeding:
+            dt = min(dt, model.feed_end - t)
+        for zone in zones:
+            work.top_source[:] = 0.0
+            if feeding:
+                rate = model.feed_multiplier * model.zone_feed_fraction[zone] * model.feed_number_rate
+                work.top_source[NUMBER] = rate / (model.zone_area[zone] * dz)
+                books.fed[NUMBER] += dt * rate
+            work.bottom_out[:] = 0.0
+            work.sink_out[:] = 0.0
+            transport_zone(content[zone], work.velocities[zone], model.sink_rate, work.top_source, dz, dt,
+                           work.bottom_out, work.sink_out)
+            books.settled += work.bottom_out * model.zone_area[zone]
+            books.lost += work.sink_out * model.zone_area[zone]
+            if p["coalescence"]:
+                most_substeps = max(most_substeps, coalesce_zone(
+                    content[zone], work.diameters[zone], work.velocities[zone], work.densities[zone],
+                    work.volume_fraction[zone], work.shear[zone], grid.pivots, grid.target, grid.loss_weight, dt,
+                    p["density_slag"], p["interfacial_tension"],
+                    p["psi"], p["virtual_mass"], p["form"], p["threshold"], p["rule"], p["efficiency"],
+                    p["speed_limit"], p["max_rate_step"], work.beta, work.births, work.k1, work.k2, work.trial))
+            removed = react_zone(content[zone], grid.pivots, grid.diameters, model.reacting, model.x_initial,
+                                 model.x_final, model.time_constant, dt)
+            books.reacted += removed * dz * model.zone_area[zone]
+        t = outputs[next_output] if abs(outputs[next_output] - (t + dt)) <= tiny else t + dt
+        steps += 1
+        if model.horizontal and t >= model.residence_time - tiny:
+            # the column has reached the tap hole: whatever is still suspended leaves with the slag
+            volume = model.zone_area[:, None, None, None] * dz
+            books.lost += (content * volume).sum(axis=1).sum(axis=0)
+            content[:] = 0.0
+        if progress and wallclock.perf_counter() - last_report >= progress_interval:
+            last_report = wallclock.perf_counter()
+            fed = float(_mass(model, books.fed).sum())
+            settled = float(_mass(model, books.settled).sum())
+            count = float((content[:, :, NUMBER, :] * (model.zone_area[:, None, None] * dz)).sum())
+            print(f"popbal {model.name}: t = {t:.5g} / {stop:.5g} s, {steps} steps, {count:.4g} droplets, "
+                  f"settled {100 * settled / max(fed, 1e-300):.3g} % of fed, wall {last_report - started:.1f} s",
+                  file=stream, flush=True)
+    wall = wallclock.perf_counter() - started
+    arrays = {"time": np.array([r["time"] for r in rows]), "z": model.z.copy(), "zone_area": model.zone_area.copy(),
+              "original_volume": grid.pivots.copy(), "original_diameter": grid.diameters.copy()}
+    for key in snapshots[0]:
+        arrays[key] = np.stack([s[key] for s in snapshots])
+    if progress:
+        print(f"popbal {model.name}: done, {steps} steps in {wall:.2f} s", file=stream, flush=True)
+    return Result(model=model, timeseries=time_series_frame(rows), arrays=arrays, wall_time=wall, steps=steps,
+                  coalescence_substeps=most_substeps, numbers=numbers)

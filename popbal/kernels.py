@@ -1,0 +1,456 @@
+"""Compiled kernels of the reduced model: coalescence (cell-average technique), collision frequency, transport in z,
+reaction and per-cell droplet properties.
+
+Kernel rules (STYLE.md): ``@njit(cache=True)`` functions of arrays and scalars only -- no case objects, no pandas,
+no files; work arrays come from the caller, so the per-pair and per-cell loops allocate nothing. Every droplet law
+is the shared one from :mod:`settler.physics` (coalescence probability, reaction fit, density and size with age,
+hindered settling); the single-droplet settling velocity arrives as a table the driver fills from
+:func:`settler.derived.settling_velocity`. Each kernel has a plain-NumPy twin in :mod:`popbal.reference` and the
+tests require both to agree.
+
+Glossary and layout (SI units throughout):
+
+* K sections (pivots x_k [m^3] of *original* droplet volume, see :mod:`popbal.grid`), J cells in z (index 0 at the
+  bottom, uniform height dz [m]), Q = 3 carried quantities per section and cell, stored as ``content[..., q, k]``:
+
+  - q = 0 ``NUMBER``: number density N [1/m^3 of slag];
+  - q = 1 ``AGE``: age moment, sum over droplets of v0 * age, per unit slag volume [s m^3/m^3] -- the seed
+    paper's volume-weighted age on coalescence; mean age of a section = AGE / (N x_k);
+  - q = 2 ``FES_REMOVED``: FeS mass removed by the reaction from the droplets now present [kg/m^3].
+
+* A droplet of section k therefore weighs rho_0 x_k - FES_REMOVED/N [kg] (rho_0 the feed matte density), which makes
+  the mass accounting exact: every operation (transport, coalescence, feed, sink) moves N and FES_REMOVED together
+  and linearly, and the reaction changes only FES_REMOVED, by an amount booked as reacted.
+
+Why carry FeS removed rather than only an age: upwind transport and the cell-average redistribution *mix* droplets
+of different ages. A mean-field age moment mixed linearly does not conserve FeS (the FeS left is a nonlinear
+function of age), so the mass balance could only be closed by a fudge. FeS removed is additive, so mixing conserves
+it exactly; the section's age for the reaction fit is then its *composition age* -- the age at which a fed droplet
+reaches the section's mean composition (settler.physics.reaction_age), the rule the shared physics uses for a
+coalesced droplet. The volume-weighted age moment is carried beside it for output and for runs without reaction.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from settler.physics import (coalescence_probability, composition_from_masses, density_at_age, reacted_mass,
+                             reaction_age, relative_diameter_at_age, richardson_zaki_factor, species_masses)
+
+NUMBER, AGE, FES_REMOVED = 0, 1, 2
+QUANTITIES = 3
+
+#: Coalescence rules: how P_c (seed Eq. 2) turns a collision into a merger in the mean field. Registry name -> code.
+#: "step": a colliding pair merges iff P_c >= threshold -- the seed paper's DEM rule (50 % or more marks the pair)
+#: applied to the mean approach speed of the pair, so the reduced model and the full engine merge the same pairs.
+#: "probability": a colliding pair merges with probability P_c (threshold ignored) -- the film-drainage reading of
+#: Luo (1993) used by Fluent/OpenFOAM population balances.
+RULE_STEP = 0
+RULE_PROBABILITY = 1
+COALESCENCE_RULES = {"step": RULE_STEP, "probability": RULE_PROBABILITY}
+
+#: Cells, and sections within a cell, holding a matte volume fraction below this take no part in coalescence
+#: (rates ~ phi^2 are nil there) nor in the Courant limit of the time step [-].
+NEGLIGIBLE_VOLUME_FRACTION = 1e-14
+
+#: Largest composition age [time constants] a section may be given; the reaction fit is flat there (e^-50).
+AGE_CAP_TIME_CONSTANTS = 50.0
+
+
+# ------------------------------------------------------------------------------------------------- coalescence
+@njit(cache=True)
+def cell_average_rates(content, pivots, target, beta, births, rates):
+    """Coalescence rates of one cell by the cell-average technique (Kumar et al. 2006, Chem. Eng. Sci. 61, 3327).
+
+    content (Q, K): row NUMBER = N_i [1/m^3], other rows droplet-carried extensive quantities [unit/m^3].
+    pivots (K,) [m^3]; target (K, K) cell of each merger or -1 (see popbal.grid.SectionGrid); beta (K, K)
+    symmetric coalescence kernel [m^3/s]. births (Q + 1, K) is work space. Writes d content/dt into rates (Q, K).
+
+    Births are first collected per cell (number B_i, volume V_i, carried quantities), then the cell's mean newborn
+    volume vbar = V_i/B_i is split between pivot i and its neighbour on vbar's side so that number and volume are
+    conserved; carried quantities follow the volume (a newborn keeps its quantity per unit volume). Deaths remove
+    each parent with its own quantity. Number and volume of every merger are conserved exactly, so the first
+    moment is invariant to round-off.
+    """
+    n_q, n_k = content.shape
+    births[:, :] = 0.0
+    rates[:, :] = 0.0
+    for j in range(n_k):
+        nj = content[NUMBER, j]
+        if nj <= 0.0:
+            continue
+        for k in range(j, n_k):
+            i = target[j, k]
+            if i < 0:
+                break  # pivots increase with k, so every larger partner exceeds the limit too
+            nk = content[NUMBER, k]
+            if nk <= 0.0:
+                continue
+            r = beta[j, k] * nj * nk
+            if r == 0.0:
+                continue
+            if j == k:
+                r *= 0.5
+            births[0, i] += r
+            births[1, i] += r * (pivots[j] + pivots[k])
+            rates[NUMBER, j] -= r
+            rates[NUMBER, k] -= r
+            for q in range(1, n_q):
+                from_j = r * content[q, j] / nj
+                from_k = r * content[q, k] / nk
+                births[q + 1, i] += from_j + from_k
+                rates[q, j] -= from_j
+                rates[q, k] -= from_k
+    for i in range(n_k):
+        b = births[0, i]
+        if b <= 0.0:
+            continue
+        vbar = births[1, i] / b
+        if not vbar > 0.0:
+            vbar = pivots[i]  # the volume underflowed (denormal birth rates in a far tail): keep it on the pivot
+        neighbour = i + 1 if vbar >= pivots[i] else i - 1
+        if neighbour < 0 or neighbour >= n_k:
+            # vbar beyond an end pivot only by round-off: keep the volume on pivot i
+            rates[NUMBER, i] += births[1, i] / pivots[i]
+            for q in range(1, n_q):
+                rates[q, i] += births[q + 1, i]
+            continue
+        a = (pivots[neighbour] - vbar) / (pivots[neighbour] - pivots[i])
+        rates[NUMBER, i] += a * b
+        rates[NUMBER, neighbour] += (1.0 - a) * b
+        share = a * pivots[i] / vbar
+        for q in range(1, n_q):
+            rates[q, i] += share * births[q + 1, i]
+            rates[q, neighbour] += (1.0 - share) * births[q + 1, i]
+
+
+@njit(cache=True)
+def largest_death_rate(content, target, beta, loss_weight):
+    """max_i sum_k beta_ik N_k w_ik [1/s]: the fastest net per-droplet coalescence rate of a cell (sets sub-steps).
+
+    w_ik = SectionGrid.loss_weight discounts mergers that land back in the larger droplet's own cell, whose gross
+    rate the cell-average birth nearly cancels, so a big droplet sweeping up fines does not force tiny steps.
+    """
+    n_k = content.shape[1]
+    largest = 0.0
+    for i in range(n_k):
+        s = 0.0
+        for k in range(n_k):
+            if target[i, k] < 0:
+                break
+            s += beta[i, k] * content[NUMBER, k] * loss_weight[i, k]
+        largest = max(largest, s)
+    return largest
+
+
+@njit(cache=True)
+def coalesce_cell(content, pivots, target, loss_weight, beta, dt, max_rate_step, births, k1, k2, trial):
+    """Advance one cell's coalescence by dt [s] with Heun's method (RK2), in sub-steps h <= max_rate_step / rate.
+
+    content (Q, K) is updated in place; births (Q + 1, K), k1, k2, trial (Q, K) are work space. Heun's method
+    conserves every linear invariant (number-weighted volume, carried quantities) to round-off; the sub-step bound
+    keeps it positive (h times the fastest death rate <= max_rate_step, 0.5 by default). Returns the sub-steps taken.
+    """
+    rate = largest_death_rate(content, target, beta, loss_weight)
+    steps = max(1, int(math.ceil(dt * rate / max_rate_step)))
+    h = dt / steps
+    n_q, n_k = content.shape
+    for _ in range(steps):
+        cell_average_rates(content, pivots, target, beta, births, k1)
+        for q in range(n_q):
+            for k in range(n_k):
+                trial[q, k] = content[q, k] + h * k1[q, k]
+        cell_average_rates(trial, pivots, target, beta, births, k2)
+        for q in range(n_q):
+            for k in range(n_k):
+                content[q, k] += 0.5 * h * (k1[q, k] + k2[q, k])
+    return steps
+
+
+@njit(cache=True)
+def integrate_cell(content, pivots, target, loss_weight, beta, duration, max_rate_step, max_step):
+    """0-D coalescence with classical RK4 over ``duration`` [s] (verification against Smoluchowski solutions).
+
+    The step is min(max_step, max_rate_step / fastest death rate), so the explicit scheme stays stable even where
+    the grid reaches volumes whose death rate is far above the dynamics (the sum and product kernels). RK4
+    conserves the first moment to round-off. content (Q, K) is updated in place; returns the number of steps.
+    """
+    n_q, n_k = content.shape
+    births = np.empty((n_q + 1, n_k))
+    k1 = np.empty((n_q, n_k))
+    k2 = np.empty((n_q, n_k))
+    k3 = np.empty((n_q, n_k))
+    k4 = np.empty((n_q, n_k))
+    trial = np.empty((n_q, n_k))
+    t = 0.0
+    steps = 0
+    while t < duration:
+        rate = largest_death_rate(content, target, beta, loss_weight)
+        h = min(max_step, duration - t)
+        if rate > 0.0:
+            h = min(h, max_rate_step / rate)
+        cell_average_rates(content, pivots, target, beta, births, k1)
+        trial[:, :] = content + 0.5 * h * k1
+        cell_average_rates(trial, pivots, target, beta, births, k2)
+        trial[:, :] = content + 0.5 * h * k2
+        cell_average_rates(trial, pivots, target, beta, births, k3)
+        trial[:, :] = content + h * k3
+        cell_average_rates(trial, pivots, target, beta, births, k4)
+        content += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        t = duration if duration - t <= h else t + h
+        steps += 1
+    return steps
+
+
+@njit(cache=True)
+def merger_efficiency(diameter_a, diameter_b, approach_speed, density_droplet, density_slag, interfacial_tension,
+                      psi, virtual_mass, form, threshold, rule):
+    """Fraction of collisions at the given approach speed [m/s] that merge: seed Eq. 2 under ``rule`` [-]."""
+    p = coalescence_probability(diameter_a, diameter_b, approach_speed, density_droplet, density_slag,
+                                interfacial_tension, psi, virtual_mass, form)
+    if rule == RULE_STEP:
+        return 1.0 if p >= threshold else 0.0
+    return p
+
+
+@njit(cache=True)
+def merger_speed_limit(diameter_a, diameter_b, density_droplet, density_slag, interfacial_tension, psi,
+                       virtual_mass, form, threshold):
+    """Largest approach speed [m/s] at which P_c >= threshold (bisection on the shared seed Eq. 2).
+
+    P_c falls monotonically with the approach speed (it is exp(-c sqrt(We)), We ~ u^2), so the 'step' rule is
+    u <= this limit. Tabulated once per run when droplet sizes and densities are fixed (no reaction), it replaces
+    two evaluations of Eq. 2 per pair and cell by a comparison; inf if P_c never drops below the threshold.
+    """
+    if threshold <= 0.0:
+        return math.inf
+    high = 1.0
+    while coalescence_probability(diameter_a, diameter_b, high, density_droplet, density_slag, interfacial_tension,
+                                  psi, virtual_mass, form) >= threshold:
+        high *= 2.0
+        if high > 1e12:
+            return math.inf
+    low = 0.0
+    for _ in range(200):
+        mid = 0.5 * (low + high)
+        if coalescence_probability(diameter_a, diameter_b, mid, density_droplet, density_slag, interfacial_tension,
+                                   psi, virtual_mass, form) >= threshold:
+            low = mid
+        else:
+            high = mid
+        if high - low <= 1e-14 * high:
+            break
+    return low
+
+
+@njit(cache=True)
+def collision_kernel(number, pivots, diameters, velocities, densities, shear_rate, density_slag,
+                     interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency, speed_limit, target,
+                     beta):
+    """Coalescence kernel beta_jk [m^3/s] of one cell: collision frequency x efficiency x merger fraction.
+
+    Differential settling (Smoluchowski 1917; Friedlander 2000 eq. 7.56): (pi/4)(d_j + d_k)^2 |v_j - v_k|, approach
+    speed |v_j - v_k|. Laminar shear (Smoluchowski 1917): (1/6) G (d_j + d_k)^3, approach speed G (d_j + d_k)/2.
+    Each mechanism's collisions merge by :func:`merger_efficiency` at its own approach speed; ``efficiency`` is
+    the collision efficiency (a calibration parameter). Pairs whose merger would exceed the size limit
+    (target < 0) get 0. diameters [m] and densities [kg/m^3] are the droplets' actual ones (after reaction),
+    velocities [m/s] their settling velocities in this cell (hindered), shear_rate G [1/s]. speed_limit (K, K):
+    :func:`merger_speed_limit` per pair for the 'step' rule with fixed sizes, or an empty (0, 0) array to evaluate
+    Eq. 2 directly. number (K,) [1/m^3] and pivots (K,) [m^3]: pairs with a section below
+    NEGLIGIBLE_VOLUME_FRACTION get 0 (far upwind tails; their mergers are nil and Eq. 2 is the costly part).
+    """
+    n_k = diameters.size
+    tabulated = speed_limit.shape[0] == n_k
+    for j in range(n_k):
+        for k in range(j, n_k):
+            b = 0.0
+            if (target[j, k] >= 0 and number[j] * pivots[j] >= NEGLIGIBLE_VOLUME_FRACTION
+                    and number[k] * pivots[k] >= NEGLIGIBLE_VOLUME_FRACTION):
+                d_sum = diameters[j] + diameters[k]
+                rho = 0.5 * (densities[j] + densities[k])
+                dv = abs(velocities[j] - velocities[k])
+                shear_speed = 0.5 * shear_rate * d_sum
+                if dv > 0.0:
+                    if tabulated:
+                        e = 1.0 if dv <= speed_limit[j, k] else 0.0
+                    else:
+                        e = merger_efficiency(diameters[j], diameters[k], dv, rho, density_slag, interfacial_tension,
+                                              psi, virtual_mass, form, threshold, rule)
+                    b += 0.25 * math.pi * d_sum * d_sum * dv * e
+                if shear_rate > 0.0:
+                    if tabulated:
+                        e = 1.0 if shear_speed <= speed_limit[j, k] else 0.0
+                    else:
+                        e = merger_efficiency(diameters[j], diameters[k], shear_speed, rho, density_slag,
+                                              interfacial_tension, psi, virtual_mass, form, threshold, rule)
+                    b += shear_rate * d_sum * d_sum * d_sum / 6.0 * e
+                b *= efficiency
+            beta[j, k] = b
+            beta[k, j] = b
+
+
+@njit(cache=True)
+def coalesce_zone(content, diameters, velocities, densities, volume_fraction, shear_rate, pivots, target,
+                  loss_weight, dt, density_slag, interfacial_tension, psi, virtual_mass, form, threshold, rule,
+                  efficiency, speed_limit, max_rate_step, beta, births, k1, k2, trial):
+    """Coalescence in every occupied cell of one zone over dt [s]; returns the largest number of sub-steps.
+
+    content (J, Q, K) in place; diameters, velocities, densities (J, K) and volume_fraction (J,) from
+    :func:`cell_properties`; shear_rate (J,) [1/s]; speed_limit as in :func:`collision_kernel`; pivots, target,
+    loss_weight from the grid. Cells below NEGLIGIBLE_VOLUME_FRACTION are skipped (the far tails the upwind scheme
+    spreads ahead of a front, whose coalescence rate ~ phi^2 is nil). beta (K, K), births (Q + 1, K), k1, k2,
+    trial (Q, K) are work space.
+    """
+    most = 0
+    for j in range(content.shape[0]):
+        if volume_fraction[j] < NEGLIGIBLE_VOLUME_FRACTION:
+            continue
+        collision_kernel(content[j, NUMBER], pivots, diameters[j], velocities[j], densities[j], shear_rate[j],
+                         density_slag, interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency,
+                         speed_limit, target, beta)
+        steps = coalesce_cell(content[j], pivots, target, loss_weight, beta, dt, max_rate_step, births, k1, k2,
+                              trial)
+        most = max(most, steps)
+    return most
+
+
+# ------------------------------------------------------------------------------------------ droplet properties
+@njit(cache=True)
+def composition_age(fes_removed, original_diameter, x_initial, x_final, time_constant):
+    """Age [s] at which a droplet fed at X0 with original diameter d0 [m] has lost ``fes_removed`` [kg] of FeS.
+
+    Inverse of settler.physics.reacted_mass through the shared laws (species_masses, composition_from_masses,
+    reaction_age); capped at AGE_CAP_TIME_CONSTANTS time constants, where the fit has reached its end state.
+    """
+    mass_cu2s, mass_fes = species_masses(original_diameter, x_initial)
+    x = composition_from_masses(mass_cu2s, max(mass_fes - fes_removed, 0.0))
+    cap = AGE_CAP_TIME_CONSTANTS * time_constant
+    if x >= x_final:
+        return cap
+    return min(max(reaction_age(x, x_initial, x_final, time_constant), 0.0), cap)
+
+
+@njit(cache=True)
+def table_velocity(row, age, age_step):
+    """Linear interpolation of a settling-velocity table row over age (one entry: age-independent) [m/s]."""
+    if row.size == 1:
+        return row[0]
+    s = age / age_step
+    m = int(s)
+    if m >= row.size - 1:
+        return row[row.size - 1]
+    f = s - m
+    return (1.0 - f) * row[m] + f * row[m + 1]
+
+
+@njit(cache=True)
+def cell_properties(content, pivots, original_diameters, reacting, x_initial, x_final, time_constant,
+                    velocity_table, age_step, hindered_exponent, density_feed, density_slag, viscosity, gravity,
+                    channel_coefficient, channel_radius, downflow, diameters, densities, velocities,
+                    volume_fraction, collective_velocity):
+    """Per-cell droplet properties of one zone, evaluated at the start of a step.
+
+    content (J, Q, K). For each section: age (composition age with reaction, else the volume-weighted mean age),
+    actual diameter d0 * relative_diameter_at_age and density_at_age (shared fit), single-droplet settling
+    velocity from the table, hindered by richardson_zaki_factor of the cell's matte volume fraction, plus the
+    zone's collective (channel) velocity and the slag downflow at the cell's lower face.
+
+    Channel closure (derivation in popbal.closures): u_c = c_ch g R_c^2 sum_k phi_k (rho_k - rho_slag) / mu,
+    the Hadamard-Rybczynski velocity of a cloud of excess density phi (rho - rho_slag) when c_ch = 4/15; zero where
+    channel_coefficient or channel_radius is 0 (the outer zone).
+
+    Outputs (filled): diameters, densities, velocities (J, K) [m, kg/m^3, m/s downwards]; volume_fraction and
+    collective_velocity (J,) [-, m/s]. Empty sections take the age of the same section in the cell above (age 0 at
+    the top), so a lagged velocity exists for droplets arriving during the step.
+    """
+    n_j, _, n_k = content.shape
+    for k in range(n_k):
+        age = 0.0
+        for j in range(n_j - 1, -1, -1):
+            n = content[j, NUMBER, k]
+            if n * pivots[k] > 0.0:  # not empty, nor so sparse that the volume underflows
+                if reacting:
+                    age = composition_age(content[j, FES_REMOVED, k] / n, original_diameters[k], x_initial,
+                                          x_final, time_constant)
+                else:
+                    age = content[j, AGE, k] / (n * pivots[k])
+            if reacting:
+                diameters[j, k] = original_diameters[k] * relative_diameter_at_age(age, x_initial, x_final,
+                                                                                   time_constant)
+                densities[j, k] = density_at_age(age, x_initial, x_final, time_constant)
+            else:
+                diameters[j, k] = original_diameters[k]
+                densities[j, k] = density_feed
+            velocities[j, k] = table_velocity(velocity_table[k], age, age_step)
+    for j in range(n_j):
+        phi = 0.0
+        excess = 0.0
+        for k in range(n_k):
+            d = diameters[j, k]
+            phi_k = content[j, NUMBER, k] * math.pi / 6.0 * d * d * d
+            phi += phi_k
+            excess += phi_k * (densities[j, k] - density_slag)
+        volume_fraction[j] = phi
+        u_c = channel_coefficient * gravity * channel_radius * channel_radius * excess / viscosity
+        collective_velocity[j] = u_c
+        hindrance = richardson_zaki_factor(min(phi, 1.0), hindered_exponent)
+        for k in range(n_k):
+            velocities[j, k] = velocities[j, k] * hindrance + u_c + downflow[j]
+
+
+# --------------------------------------------------------------------------------------------------- transport
+@njit(cache=True)
+def transport_zone(content, face_velocity, sink_rate, top_source, dz, dt, bottom_out, sink_out):
+    """Implicit (backward-Euler) first-order upwind transport in z of one zone over dt [s].
+
+    content (J, Q, K), cell 0 at the bottom. face_velocity (J, K) [m/s, >= 0 downwards]: velocity of section k's
+    droplets through the lower face of cell j (upwind: the droplets of cell j cross it). sink_rate (J,) [1/s]:
+    volumetric slag withdrawal per unit volume (side outlet band). top_source (Q, K): feed into the top cell [per
+    m^3 per s]. Every velocity points down, so the implicit system is lower-triangular and solved in one sweep from
+    the top: unconditionally stable and positive, and conservative -- what leaves a cell enters the one below.
+    bottom_out and sink_out (Q, K) accumulate what left through the bottom and through the sink during dt, per unit
+    area of the zone [per m^2].
+    """
+    n_j, n_q, n_k = content.shape
+    for k in range(n_k):
+        for q in range(n_q):
+            inflow = dt * top_source[q, k]
+            for j in range(n_j - 1, -1, -1):
+                courant = dt * face_velocity[j, k] / dz
+                withdrawn = dt * sink_rate[j]
+                new = (content[j, q, k] + inflow) / (1.0 + courant + withdrawn)
+                content[j, q, k] = new
+                sink_out[q, k] += withdrawn * new * dz
+                inflow = courant * new
+            bottom_out[q, k] += inflow * dz
+
+
+# ---------------------------------------------------------------------------------------------------- reaction
+@njit(cache=True)
+def react_zone(content, pivots, original_diameters, reacting, x_initial, x_final, time_constant, dt):
+    """Age every droplet of one zone by dt [s]; with reaction, remove FeS along the shared fit.
+
+    The age moment grows by N x_k dt. With reaction, a section at composition age a (from its FES_REMOVED per
+    droplet) goes to reacted_mass(d0, a + dt) per droplet -- the fit itself, not a rate, so the step adds no
+    integration error. Returns the increase of FES_REMOVED summed over cells and sections [kg/m^3]; times dz and
+    the zone area it is the FeS mass removed during dt [kg].
+    """
+    removed = 0.0
+    n_j, _, n_k = content.shape
+    for j in range(n_j):
+        for k in range(n_k):
+            n = content[j, NUMBER, k]
+            if n <= 0.0:
+                continue
+            content[j, AGE, k] += n * pivots[k] * dt
+            if reacting:
+                per_droplet = content[j, FES_REMOVED, k] / n
+                age = composition_age(per_droplet, original_diameters[k], x_initial, x_final, time_constant)
+                new = reacted_mass(original_diameters[k], age + dt, x_initial, x_final, time_constant)
+                if new > per_droplet:
+                    content[j, FES_REMOVED, k] = n * new
+                    removed += n * (new - per_droplet)
+    return removed

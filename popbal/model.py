@@ -1,0 +1,278 @@
+"""From a case to the reduced model's arrays: grid, zones, feed, slag flow, velocity table, parameters.
+
+:func:`setup` is the one entry point the command line, the tests, the benchmark and the report scripts call
+(``popbal.setup("simple", popbal__end_time=10)``); it returns a :class:`Model`, plain data that
+:func:`popbal.run` advances. Nothing here is computed twice: settling velocities come from
+:func:`settler.derived.settling_velocity`, feed rates from :mod:`settler.physics.feed`, the reaction from
+:mod:`settler.physics.matte`.
+
+Zones: index 0 is the channel under the inlet, index 1 the outer zone (see :mod:`popbal.closures`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from settler.cases import Case, CaseError, load_case
+from settler.derived import Quantity, settling_velocity
+from settler.physics import (PROBABILITY_FORMS, STANDARD_GRAVITY, density_at_age, droplet_rate,
+                             relative_diameter_at_age, scale_factor_pdf)
+
+from . import closures
+from .grid import SectionGrid, make_grid, split_to_pivots, volume_of
+from .kernels import COALESCENCE_RULES, merger_speed_limit
+
+ZONES = ("channel", "outer")
+CHANNEL, OUTER = 0, 1
+
+#: Velocity-table resolution with reaction: ages 0 ... TABLE_SPAN time constants in steps of 1/TABLE_PER_TAU.
+TABLE_PER_TAU = 20
+TABLE_SPAN = 12.0
+
+#: Gauss-Legendre points over the scale-factor range of the normal feed distribution.
+FEED_QUADRATURE_POINTS = 200
+
+
+@dataclass(frozen=True)
+class Model:
+    """Everything a run needs, as arrays and scalars (SI units). Built by :func:`setup`.
+
+    grid: the sections (original droplet volume). cells J, cell_height dz [m], z (J,) cell centres [m].
+    zone_area (2,) [m^2]: channel, outer. feed_number_rate (K,) [1/s]: droplets fed per second per section.
+    zone_feed_fraction (2,) [-]. feed_multiplier [-] and feed_end [s]: the feed is feed_multiplier x the case's rate
+    while t < feed_end. downflow (J,) [m/s]: slag velocity at each cell's lower face; sink_rate (J,) [1/s]: slag
+    withdrawal per unit volume. velocity_table (K, M) [m/s] single-droplet settling velocity over age, age_step [s].
+    residence_time [s]: slag mass / slag feed rate (inf without slag feed). stop_time [s]: when the run ends.
+    """
+
+    case: Case
+    grid: SectionGrid
+    cells: int
+    cell_height: float
+    z: np.ndarray
+    zone_area: np.ndarray
+    channel_radius: float
+    inlet_radius: float
+    feed_density: float
+    feed_number_rate: np.ndarray
+    zone_feed_fraction: np.ndarray
+    feed_multiplier: float
+    feed_end: float
+    downflow: np.ndarray
+    sink_rate: np.ndarray
+    velocity_table: np.ndarray
+    age_step: float
+    residence_time: float
+    stop_time: float
+    horizontal: bool
+    reacting: bool
+    x_initial: float
+    x_final: float
+    time_constant: float
+    viscosity: float
+    gravity: float = STANDARD_GRAVITY
+    parameters: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.case.case.name
+
+    def numbers(self) -> list[Quantity]:
+        """The dimensionless groups and scales of this model, logged at start-up and written to metadata."""
+        return start_up_numbers(self)
+
+
+def setup(case: str | os.PathLike | Case, overrides: dict | list | None = None, **keyword_overrides) -> Model:
+    """The reduced model of a case: a preset name, a TOML path or a :class:`settler.cases.Case`.
+
+    Overrides as ``{"popbal.end_time": 10}``, ``["popbal.end_time=10"]`` or keywords ``popbal__end_time=10``.
+    Raises :class:`settler.cases.CaseError` naming the key, the value and what is allowed.
+    """
+    merged = {}
+    if isinstance(overrides, (list, tuple)):
+        from settler.cases import parse_override
+
+        overrides = dict(parse_override(o) for o in overrides)
+    merged.update(overrides or {})
+    merged.update({k.replace("__", "."): v for k, v in keyword_overrides.items()})
+    if isinstance(case, Case):
+        case = case.replace(**{k.replace(".", "__"): v for k, v in merged.items()}) if merged else case
+    else:
+        case = load_case(case, merged)
+    return build(case)
+
+
+def build(case: Case) -> Model:
+    """Arrays and parameters of the reduced model for a validated case."""
+    g, p, f, c = case.geometry, case.popbal, case.feed, case.coalescence
+    box_area = g.width * g.depth
+    inlet_radius = 0.5 * g.inlet_diameter
+    channel_radius = p.channel_radius_factor * inlet_radius
+    channel_area = math.pi * channel_radius**2
+    if channel_area >= box_area:
+        raise CaseError(f"popbal.channel_radius_factor = {p.channel_radius_factor!r}: the channel (radius "
+                        f"{channel_radius:g} m) must be smaller than the box cross-section {g.width:g} x {g.depth:g} m")
+    if channel_area == 0.0 and p.channel_feed_fraction > 0.0:
+        raise CaseError(f"popbal.channel_feed_fraction = {p.channel_feed_fraction!r}: allowed 0 when "
+                        "popbal.channel_radius_factor = 0 (no channel zone)")
+    zone_area = np.array([channel_area, box_area - channel_area])
+
+    # sections: original volumes from the smallest fed droplet to the largest a merger may make
+    fed_diameters, fed_numbers = feed_points(case)
+    top = volume_of(c.size_limit) if c.enabled else volume_of(fed_diameters.max())
+    grid = make_grid(float(volume_of(fed_diameters.min())), float(top), p.sections_per_doubling)
+    feed_number_rate = split_to_pivots(volume_of(fed_diameters), fed_numbers, grid.pivots)
+
+    cells = p.height_cells
+    dz = g.height / cells
+    z = (np.arange(cells) + 0.5) * dz
+
+    # slag: residence time, and in 'vertical' flow a downflow that the outlet band withdraws
+    slag_volume_rate = case.slag.feed_rate / case.slag.density
+    residence = box_area * g.height / slag_volume_rate if slag_volume_rate > 0.0 else math.inf
+    horizontal = p.slag_flow == "horizontal"
+    faces = np.arange(cells + 1) * dz
+    if horizontal or slag_volume_rate == 0.0:
+        face_velocity = np.zeros(cells + 1)
+    else:
+        band_low = g.outlet_height - 0.5 * g.outlet_diameter
+        face_velocity = slag_volume_rate / box_area * np.clip((faces - band_low) / g.outlet_diameter, 0.0, 1.0)
+    downflow = face_velocity[:-1].copy()
+    sink_rate = np.diff(face_velocity) / dz
+
+    feed_end = p.feed_duration if p.feed_duration is not None else math.inf
+    feed_multiplier = 1.0
+    stop_time = p.end_time
+    if horizontal:
+        if not math.isfinite(residence):
+            raise CaseError("popbal.slag_flow = 'horizontal': needs slag.feed_rate > 0, which sets the residence time "
+                            "the column spends in the settler")
+        # the column passes under the inlet for the fraction of its residence time that the inlet covers
+        inlet_area = math.pi * inlet_radius**2
+        feed_multiplier = box_area / inlet_area
+        feed_end = min(feed_end, residence * inlet_area / box_area)
+        stop_time = min(stop_time, residence)
+
+    reacting = bool(case.reaction.enabled)
+    x0 = case.x_initial if reacting else math.nan
+    xf = case.x_final if reacting else math.nan
+    tau = case.reaction.time_constant
+    ages = np.arange(int(TABLE_SPAN * TABLE_PER_TAU) + 1) * (tau / TABLE_PER_TAU) if reacting else np.zeros(1)
+    table = np.empty((grid.size, ages.size))
+    for m, age in enumerate(ages):
+        if reacting:
+            scale = relative_diameter_at_age(age, x0, xf, tau)
+            density = density_at_age(age, x0, xf, tau)
+        else:
+            scale, density = 1.0, case.matte.density
+        for k, d0 in enumerate(grid.diameters):
+            table[k, m] = settling_velocity(case, d0 * scale, density)
+
+    # 'step' rule with fixed droplet sizes: the approach speed below which a pair merges, once per pair
+    speed_limit = np.empty((0, 0))
+    if c.enabled and p.coalescence_rule == "step" and not reacting:
+        speed_limit = np.array([[merger_speed_limit(da, db, case.matte.density, case.slag.density,
+                                                    case.matte.interfacial_tension, c.psi, c.virtual_mass,
+                                                    PROBABILITY_FORMS[c.probability_form], c.threshold)
+                                 for db in grid.diameters] for da in grid.diameters])
+
+    parameters = {
+        "coalescence": bool(c.enabled),
+        "form": PROBABILITY_FORMS[c.probability_form],
+        "psi": c.psi,
+        "virtual_mass": c.virtual_mass,
+        "threshold": c.threshold,
+        "rule": COALESCENCE_RULES[p.coalescence_rule],
+        "efficiency": p.collision_efficiency,
+        "interfacial_tension": case.matte.interfacial_tension,
+        "hindered_exponent": p.hindered_exponent,
+        "channel_coefficient": p.channel_coefficient,
+        "shear_coefficient": p.shear_coefficient,
+        "max_courant": p.max_courant,
+        "time_step": p.time_step,
+        "output_interval": p.output_interval,
+        "density_slag": case.slag.density,
+        "max_rate_step": 0.5,
+        "speed_limit": speed_limit,
+    }
+    return Model(case=case, grid=grid, cells=cells, cell_height=dz, z=z, zone_area=zone_area,
+                 channel_radius=channel_radius, inlet_radius=inlet_radius, feed_density=case.matte.density,
+                 feed_number_rate=feed_number_rate,
+                 zone_feed_fraction=np.array([p.channel_feed_fraction, 1.0 - p.channel_feed_fraction]),
+                 feed_multiplier=feed_multiplier, feed_end=feed_end, downflow=downflow, sink_rate=sink_rate,
+                 velocity_table=table, age_step=tau / TABLE_PER_TAU, residence_time=residence, stop_time=stop_time,
+                 horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
+                 viscosity=case.slag_viscosity, parameters=parameters)
+
+
+def feed_points(case: Case) -> tuple[np.ndarray, np.ndarray]:
+    """Fed droplet diameters [m] and number rates [1/s] that deliver exactly feed.mass_rate.
+
+    'normal': Gauss-Legendre quadrature of the truncated-normal scale factor (settler.physics.scale_factor_pdf) over
+    [scale_min, scale_max], so the number rate equals settler.physics.droplet_rate to quadrature accuracy.
+    'table': the listed diameters with their mass fractions (e.g. physics.md section 1, Jylha et al. 2020).
+    """
+    f = case.feed
+    density = case.matte.density
+    if f.distribution == "table":
+        diameters = np.asarray(f.table_diameters, dtype=float)
+        mass_share = np.asarray(f.table_mass_fractions, dtype=float)
+        mass_share = mass_share / mass_share.sum()
+        return diameters, f.mass_rate * mass_share / (density * volume_of(diameters))
+    if f.scale_std == 0.0:
+        diameters = np.array([f.mean_diameter])
+        return diameters, np.array([f.mass_rate / (density * volume_of(f.mean_diameter))])
+    nodes, weights = np.polynomial.legendre.leggauss(FEED_QUADRATURE_POINTS)
+    s = 0.5 * (f.scale_max - f.scale_min) * nodes + 0.5 * (f.scale_max + f.scale_min)
+    w = 0.5 * (f.scale_max - f.scale_min) * weights * scale_factor_pdf(s, f.scale_std, f.scale_min, f.scale_max)
+    diameters = f.mean_diameter * s
+    masses = density * volume_of(diameters)
+    return diameters, f.mass_rate * w / np.sum(w * masses)
+
+
+def start_up_numbers(model: Model) -> list[Quantity]:
+    """Scales and dimensionless groups of the reduced model (logged at start-up, written to metadata.json)."""
+    case, grid = model.case, model.grid
+    f = case.feed
+    q_total = f.mass_rate / model.feed_density
+    excess = model.feed_density - case.slag.density
+    out = [
+        Quantity("sections", grid.size, "-", f"pivot ratio {grid.ratio:.4f}, {grid.diameters[0] * 1e6:.4g} to "
+                                              f"{grid.diameters[-1] * 1e6:.4g} um (original diameter)"),
+        Quantity("height cells", model.cells, "-", f"dz = {model.cell_height * 1e3:.4g} mm"),
+        Quantity("droplets fed per second", float(model.feed_number_rate.sum()), "1/s",
+                 f"{f.distribution} distribution"),
+        Quantity("slag residence time", model.residence_time, "s", "box slag volume / slag volume feed"),
+    ]
+    if f.distribution == "normal" and f.mass_rate > 0.0:
+        shared = droplet_rate(f.mass_rate, f.mean_diameter, model.feed_density, f.scale_std, f.scale_min, f.scale_max)
+        out.append(Quantity("droplets fed per second, shared droplet_rate", shared, "1/s", "settler.physics.feed"))
+    q_channel = q_total * model.zone_feed_fraction[CHANNEL]
+    if model.zone_area[CHANNEL] > 0.0 and q_channel > 0.0:
+        coefficient = model.parameters["channel_coefficient"]
+        u_c = closures.steady_channel_velocity(q_channel, excess, model.viscosity, coefficient)
+        phi = closures.steady_channel_fraction(q_channel, model.channel_radius, u_c)
+        out += [
+            Quantity("steady channel velocity u_c", u_c, "m/s", "sqrt(c_ch Q_ch drho g / (pi mu))"),
+            Quantity("steady channel volume fraction", phi, "-", "Q_ch / (pi R_c^2 u_c)"),
+            Quantity("plume Reynolds number", closures.plume_reynolds(u_c, model.channel_radius, case.slag.density,
+                                                                      model.viscosity), "-", "rho_s u_c R_c / mu"),
+            Quantity("channel shear rate G", model.parameters["shear_coefficient"] * u_c / model.channel_radius,
+                     "1/s", "shear_coefficient u_c / R_c"),
+            Quantity("Courant number of u_c at time_step", u_c * model.parameters["time_step"] / model.cell_height,
+                     "-", "implicit transport: accuracy, not stability"),
+        ]
+    v = model.velocity_table[:, 0]
+    out += [
+        Quantity("settling velocity, smallest section", float(v[0]), "m/s", f"{case.drag.law} drag, fresh matte"),
+        Quantity("settling velocity, largest section", float(v[-1]), "m/s", f"{case.drag.law} drag, fresh matte"),
+        Quantity("crossing time of the smallest section", case.geometry.height / float(v[0]), "s", "H / v"),
+    ]
+    if model.horizontal:
+        out.append(Quantity("feed window of the column", model.feed_end, "s",
+                            "residence time x inlet area / box area"))
+    return out
