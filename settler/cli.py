@@ -70,9 +70,24 @@ def _cases(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------------------------------- reduced
+def _reduced_arguments(parser):
+    from popbal.cli import add_arguments
+
+    _add_case_arguments(parser)
+    add_arguments(parser)
+
+
+def _reduced(args) -> int:
+    from popbal.cli import main as reduced_main
+
+    return reduced_main(args)
+
+
 COMMANDS = {
     "info": (_info_arguments, _info, "print a resolved case and its derived numbers"),
     "cases": (_cases_arguments, _cases, "list the case presets, or print the case-file reference"),
+    "reduced": (_reduced_arguments, _reduced, "run the reduced population-balance model (popbal) of a case"),
 }
 
 

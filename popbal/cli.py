@@ -1,0 +1,48 @@
+"""``settler reduced CASE [section.key=value ...] --out DIR``: run the reduced model of a case and write its outputs.
+
+Registered in :data:`settler.cli.COMMANDS`; the case arguments (CASE and overrides) are added there, the rest here.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+
+def add_arguments(parser):
+    """Options of ``settler reduced`` beyond CASE and the overrides."""
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="output folder: timeseries.csv, distribution.npz, case.toml, metadata.json")
+    parser.add_argument("--end-time", type=float, metavar="S", help="simulated time to stop at [s] "
+                                                                     "(default: popbal.end_time of the case)")
+    parser.add_argument("--output-interval", type=float, metavar="S",
+                        help="simulated time between outputs [s] (default: popbal.output_interval)")
+    progress = parser.add_mutually_exclusive_group()
+    progress.add_argument("--progress", action="store_true", default=None, help="print progress lines to stderr")
+    progress.add_argument("--quiet", action="store_true", help="no progress lines (default: only for long runs)")
+
+
+def main(args) -> int:
+    """Run ``settler reduced``; CaseError is reported by settler.cli (exit status 2)."""
+    from . import run, setup
+
+    model = setup(args.case, args.overrides)
+    progress = False if args.quiet else args.progress
+    try:
+        result = run(model, end_time=args.end_time, output_interval=args.output_interval, progress=progress)
+    except ValueError as exc:
+        print(f"settler reduced: error: {exc}", file=sys.stderr)
+        return 2
+    out = result.save(args.out)
+    last = result.timeseries.iloc[-1]
+    fed = last["mass_fed"]
+    share = (lambda m: f"{100 * m / fed:.3g} %") if fed > 0 else (lambda m: "-")
+    mean = last["mean_diameter"]
+    print(f"settler reduced {model.name}: {result.steps} steps, {last['time']:g} s simulated in "
+          f"{result.wall_time:.2f} s wall")
+    print(f"  droplets in slag {last['droplet_count']:.4g}, mean diameter "
+          f"{'-' if math.isnan(mean) else f'{mean * 1e6:.4g} um'}; of the matte fed ({fed:.4g} kg): "
+          f"settled {share(last['mass_settled'])}, in slag {share(last['mass_in_slag'])}, "
+          f"lost {share(last['mass_lost'])}, FeS reacted {share(last['mass_reacted'])}")
+    print(f"  outputs in {out}/ (timeseries.csv, distribution.npz, case.toml, metadata.json)")
+    return 0
