@@ -19,7 +19,8 @@ def add_arguments(parser):
                         help="simulated time between outputs [s] (default: popbal.output_interval)")
     progress = parser.add_mutually_exclusive_group()
     progress.add_argument("--progress", action="store_true", default=None, help="print progress lines to stderr")
-    progress.add_argument("--quiet", action="store_true", help="no progress lines (default: only for long runs)")
+    progress.add_argument("--quiet", action="store_true",
+                          help="no progress lines (default: they start once a run has taken 5 s)")
 
 
 def main(args) -> int:

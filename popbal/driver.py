@@ -57,6 +57,10 @@ DISTRIBUTION_ARRAYS: dict[str, tuple[str, str]] = {
 }
 
 
+#: Seconds of wall time after which a run started with progress=None begins to report.
+AUTO_PROGRESS_AFTER = 5.0
+
+
 @dataclass
 class Result:
     """A finished reduced-model run. Arrays as in :data:`DISTRIBUTION_ARRAYS`; ``timeseries`` a DataFrame with the
@@ -211,9 +215,10 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
     """Run the reduced model and return a :class:`Result`.
 
     model: a :class:`Model` from :func:`popbal.setup`, a case, or a preset name / path (then ``overrides`` as in
-    setup). end_time, output_interval [s] override popbal.end_time / popbal.output_interval. progress: print a
-    progress line to ``stream`` (stderr) every progress_interval seconds of wall time; default on for runs expected
-    to take long (more than 10 000 steps at the largest step).
+    setup). end_time, output_interval [s] override popbal.end_time / popbal.output_interval. progress: True prints
+    the start-up numbers and a progress line to ``stream`` (stderr) every progress_interval seconds of wall time;
+    False prints nothing; None (default) starts the progress lines once a run has taken AUTO_PROGRESS_AFTER seconds,
+    so short runs stay quiet and long ones report.
     """
     if not isinstance(model, Model):
         model = setup(model, **overrides)
@@ -227,8 +232,7 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
     interval = p["output_interval"] if output_interval is None else output_interval
     if not interval > 0.0:
         raise ValueError(f"run: output_interval = {output_interval!r} s, allowed > 0")
-    if progress is None:
-        progress = stop / p["time_step"] > 10_000
+    automatic = progress is None
     stream = stream or sys.stderr
     grid, cells, dz = model.grid, model.cells, model.cell_height
     content = np.zeros((len(ZONES), cells, QUANTITIES, grid.size))
@@ -236,8 +240,9 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
     books = _Books(grid.size)
     zones = [z for z in (CHANNEL, OUTER) if model.zone_area[z] > 0.0]
     numbers = model.numbers()
+    start_up_line = f"popbal {model.name}: " + "; ".join(f"{q.name} {q.value:.4g} {q.unit}" for q in numbers)
     if progress:
-        print(f"popbal {model.name}: " + "; ".join(f"{q.name} {q.value:.4g} {q.unit}" for q in numbers), file=stream)
+        print(start_up_line, file=stream)
 
     rows, snapshots = [], []
     started = wallclock.perf_counter()
@@ -294,6 +299,9 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
             volume = model.zone_area[:, None, None, None] * dz
             books.lost += (content * volume).sum(axis=1).sum(axis=0)
             content[:] = 0.0
+        if automatic and wallclock.perf_counter() - started >= AUTO_PROGRESS_AFTER:
+            automatic, progress = False, True
+            print(start_up_line, file=stream)
         if progress and wallclock.perf_counter() - last_report >= progress_interval:
             last_report = wallclock.perf_counter()
             fed = float(_mass(model, books.fed).sum())

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import popbal
+from popbal import ideal
 from settler.cases import list_presets
 from settler.cli import main
 from settler.output import TIME_SERIES, read_time_series
@@ -77,4 +78,9 @@ def test_horizontal_column_loses_what_cannot_settle_in_the_residence_time():
     slow = fed & (v * model.residence_time < 0.5 * model.case.geometry.height)
     fast = fed & (v * (model.residence_time - model.feed_end) > 2.0 * model.case.geometry.height)
     assert slow.any() and fast.any()
+    exact = 1.0 - ideal.top_entry_column_capture(v, model.residence_time, model.case.geometry.height, model.feed_end)
+    assert np.all(exact[slow] == 1.0) and np.all(exact[fast] == 0.0)
     assert np.all(loss.loss_fraction[slow] > 0.999) and np.all(loss.loss_fraction[fast] < 1e-3)
+    # ideal settlers for comparison: Hazen's plug flow captures part of the slow classes, which enter spread over H
+    assert np.all(ideal.plug_flow_capture(v[slow], model.residence_time, model.case.geometry.height) < 0.5)
+    assert np.all(ideal.mixed_capture(v, 1.0, 1.0) <= ideal.plug_flow_capture(v, 1.0, 1.0))

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import popbal
+from popbal import ideal
 from popbal.smoluchowski import KERNELS, solve
 from settler.physics import stokes_velocity
 
@@ -118,6 +119,7 @@ def test_outlet_band_loses_the_through_flow_share():
     u = model.velocity_table[0, 0]
     w = model.downflow.max()
     rate = np.diff(ts.mass_lost.to_numpy())[-5:] / np.diff(ts.time.to_numpy())[-5:] / model.case.feed.mass_rate
+    assert np.allclose(rate, 1.0 - ideal.through_flow_capture(u, w), rtol=1e-6)
     assert np.allclose(rate, w / (u + w), rtol=1e-6)
 
 
