@@ -38,16 +38,19 @@ from __future__ import annotations
 
 import math
 
+from numba import njit
+
 from settler.physics import STANDARD_GRAVITY
 
 #: Hadamard-Rybczynski coefficient of a cloud with viscosity ratio 1: U = (4/15) phi drho g R^2 / mu.
 CLOUD_COEFFICIENT = 4.0 / 15.0
 
 
-def cloud_velocity(volume_fraction, excess_density, radius, viscosity, coefficient=CLOUD_COEFFICIENT,
-                   gravity=STANDARD_GRAVITY):
-    """Velocity [m/s] of a cloud of radius [m] at volume fraction phi [-]: c phi drho g R^2 / mu."""
-    return coefficient * volume_fraction * excess_density * gravity * radius * radius / viscosity
+@njit(cache=True)
+def cloud_velocity(excess_load, radius, viscosity, coefficient=CLOUD_COEFFICIENT, gravity=STANDARD_GRAVITY):
+    """Velocity [m/s] of a cloud of radius R [m] whose excess density is excess_load = sum_k phi_k (rho_k - rho_s)
+    [kg/m^3]: c_ch excess_load g R^2 / mu. The one implementation of the closure; the kernels call it per cell."""
+    return coefficient * excess_load * gravity * radius * radius / viscosity
 
 
 def steady_channel_velocity(volume_flux, excess_density, viscosity, coefficient=CLOUD_COEFFICIENT,

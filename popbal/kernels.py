@@ -5,8 +5,10 @@ Kernel rules (STYLE.md): ``@njit(cache=True)`` functions of arrays and scalars o
 no files; work arrays come from the caller, so the per-pair and per-cell loops allocate nothing. Every droplet law
 is the shared one from :mod:`settler.physics` (coalescence probability, reaction fit, density and size with age,
 hindered settling); the single-droplet settling velocity arrives as a table the driver fills from
-:func:`settler.derived.settling_velocity`. Each kernel has a plain-NumPy twin in :mod:`popbal.reference` and the
-tests require both to agree.
+:func:`settler.derived.settling_velocity`, and the plume velocity is :func:`popbal.closures.cloud_velocity`. The
+pair and transport kernels (cell-average rates, collision kernel, upwind sweep) have plain-NumPy twins in
+:mod:`popbal.reference` that the tests require to agree; the time integrators are checked against the
+Smoluchowski solutions and the reaction and property kernels against the shared laws they call.
 
 Glossary and layout (SI units throughout):
 
@@ -39,6 +41,8 @@ from numba import njit
 
 from settler.physics import (coalescence_probability, composition_from_masses, density_at_age, reacted_mass,
                              reaction_age, relative_diameter_at_age, richardson_zaki_factor, species_masses)
+
+from .closures import cloud_velocity
 
 NUMBER, AGE, FES_REMOVED = 0, 1, 2
 QUANTITIES = 3
@@ -394,7 +398,7 @@ def cell_properties(content, pivots, original_diameters, reacting, x_initial, x_
             phi += phi_k
             excess += phi_k * (densities[j, k] - density_slag)
         volume_fraction[j] = phi
-        u_c = channel_coefficient * gravity * channel_radius * channel_radius * excess / viscosity
+        u_c = cloud_velocity(excess, channel_radius, viscosity, channel_coefficient, gravity)
         collective_velocity[j] = u_c
         hindrance = richardson_zaki_factor(min(phi, 1.0), hindered_exponent)
         for k in range(n_k):
