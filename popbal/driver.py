@@ -210,6 +210,41 @@ def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: 
     return row, arrays
 
 
+def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: list[int], dt: float,
+          feeding: bool) -> int:
+    """One split step of length dt in every zone: transport with feed, sink and settling; coalescence; reaction.
+
+    Properties in ``work`` are those of the step start. Books every amount that enters or leaves. Returns the
+    largest number of coalescence sub-steps any cell needed.
+    """
+    p, grid, dz = model.parameters, model.grid, model.cell_height
+    most = 0
+    for zone in zones:
+        area = model.zone_area[zone]
+        work.top_source[:] = 0.0
+        if feeding:
+            rate = model.feed_multiplier * model.zone_feed_fraction[zone] * model.feed_number_rate
+            work.top_source[NUMBER] = rate / (area * dz)
+            books.fed[NUMBER] += dt * rate
+        work.bottom_out[:] = 0.0
+        work.sink_out[:] = 0.0
+        transport_zone(content[zone], work.velocities[zone], model.sink_rate, work.top_source, dz, dt,
+                       work.bottom_out, work.sink_out)
+        books.settled += work.bottom_out * area
+        books.lost += work.sink_out * area
+        if p["coalescence"]:
+            most = max(most, coalesce_zone(
+                content[zone], work.diameters[zone], work.velocities[zone], work.densities[zone],
+                work.volume_fraction[zone], work.shear[zone], grid.pivots, grid.target, grid.loss_weight, dt,
+                p["density_slag"], p["interfacial_tension"], p["psi"], p["virtual_mass"], p["form"],
+                p["threshold"], p["rule"], p["efficiency"], p["speed_limit"], p["max_rate_step"], work.beta,
+                work.births, work.k1, work.k2, work.trial))
+        removed = react_zone(content[zone], grid.pivots, grid.diameters, model.reacting, model.x_initial,
+                             model.x_final, model.time_constant, dt)
+        books.reacted += removed * dz * area
+    return most
+
+
 def run(model: Model | Case | str, end_time: float | None = None, output_interval: float | None = None,
         progress: bool | None = None, progress_interval: float = 2.0, stream=None, **overrides) -> Result:
     """Run the reduced model and return a :class:`Result`.
@@ -270,28 +305,7 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
         feeding = t < model.feed_end - tiny
         if feeding:
             dt = min(dt, model.feed_end - t)
-        for zone in zones:
-            work.top_source[:] = 0.0
-            if feeding:
-                rate = model.feed_multiplier * model.zone_feed_fraction[zone] * model.feed_number_rate
-                work.top_source[NUMBER] = rate / (model.zone_area[zone] * dz)
-                books.fed[NUMBER] += dt * rate
-            work.bottom_out[:] = 0.0
-            work.sink_out[:] = 0.0
-            transport_zone(content[zone], work.velocities[zone], model.sink_rate, work.top_source, dz, dt,
-                           work.bottom_out, work.sink_out)
-            books.settled += work.bottom_out * model.zone_area[zone]
-            books.lost += work.sink_out * model.zone_area[zone]
-            if p["coalescence"]:
-                most_substeps = max(most_substeps, coalesce_zone(
-                    content[zone], work.diameters[zone], work.velocities[zone], work.densities[zone],
-                    work.volume_fraction[zone], work.shear[zone], grid.pivots, grid.target, grid.loss_weight, dt,
-                    p["density_slag"], p["interfacial_tension"],
-                    p["psi"], p["virtual_mass"], p["form"], p["threshold"], p["rule"], p["efficiency"],
-                    p["speed_limit"], p["max_rate_step"], work.beta, work.births, work.k1, work.k2, work.trial))
-            removed = react_zone(content[zone], grid.pivots, grid.diameters, model.reacting, model.x_initial,
-                                 model.x_final, model.time_constant, dt)
-            books.reacted += removed * dz * model.zone_area[zone]
+        most_substeps = max(most_substeps, _step(model, content, work, books, zones, dt, feeding))
         t = outputs[next_output] if abs(outputs[next_output] - (t + dt)) <= tiny else t + dt
         steps += 1
         if model.horizontal and t >= model.residence_time - tiny:
