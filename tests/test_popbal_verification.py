@@ -146,3 +146,17 @@ def test_mass_accounting_closes_in_the_horizontal_column():
     assert last.time == pytest.approx(result.model.residence_time)
     assert last.mass_in_slag == 0.0 and last.mass_lost > 0.0
     assert math.isclose(last.mass_fed, last.mass_settled + last.mass_lost, rel_tol=1e-12)
+
+
+# ----------------------------------------------------------------------------------------------- convergence
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["simple", "deep"])
+def test_paper_cases_converge_in_time_step_and_cells(name):
+    """Halving dz and dt changes the 60 s answers by less than the calibration will ever resolve."""
+    coarse = popbal.run(name).timeseries.iloc[-1]
+    fine = popbal.run(name, popbal__height_cells=100, popbal__time_step=0.025).timeseries.iloc[-1]
+    assert fine.droplet_count == pytest.approx(coarse.droplet_count, rel=0.01)
+    assert fine.mean_diameter == pytest.approx(coarse.mean_diameter, rel=1e-3)
+    assert fine.sauter_diameter == pytest.approx(coarse.sauter_diameter, rel=5e-3)
+    settled = fine.mass_settled / fine.mass_fed
+    assert settled == pytest.approx(coarse.mass_settled / coarse.mass_fed, rel=0.05)
