@@ -15,7 +15,8 @@ from scipy import optimize
 from .cases import Case
 from .physics import (FORM_LUO, FORM_SEED, coalescence_probability, droplet_rate, hadamard_rybczynski_factor,
                       mean_droplet_mass, relaxation_time, relative_diameter, reynolds_number,
-                      schiller_naumann_velocity, scale_factor_moment, stokes_velocity, weber_number)
+                      schiller_naumann_velocity, scale_factor_moment, stokes_velocity,
+                              table_droplet_rate, weber_number)
 from .physics import matte_density as matte_density_law
 
 #: Richardson-Zaki exponent n (Richardson & Zaki 1954) used for the hindered estimate.
@@ -49,6 +50,37 @@ def settling_velocity(case: Case, diameter, density=None):
     return v
 
 
+@dataclass(frozen=True)
+class FeedSummary:
+    """The feed distribution reduced to the numbers the derived quantities need (SI)."""
+
+    rate: float  # droplets per second [1/s]
+    mean_mass: float  # [kg]
+    mean_mass_note: str
+    mean_diameter: float  # d_mean (normal) or mass-weighted mean diameter (table) [m]
+    smallest: float  # [m]
+    largest: float  # [m]
+    slowness_factor: float  # sum_k w_k (d_mean / d_k)^2 over mass fractions w_k [-]
+
+
+def feed_summary(case: Case) -> FeedSummary:
+    """Rate, mean mass and size range of the case's feed, for either feed distribution."""
+    f, rho_p = case.feed, case.matte.density
+    if getattr(f, "distribution", "normal") == "table":
+        d = np.asarray(f.table_diameters, dtype=float)
+        w = np.asarray(f.table_mass_fractions, dtype=float)
+        rate = float(table_droplet_rate(f.mass_rate, d, w, rho_p))
+        d_mean = float(np.sum(w * d))
+        mean_mass = f.mass_rate / rate if rate > 0 else float(np.sum(w * rho_p * math.pi / 6.0 * d**3))
+        return FeedSummary(rate, mean_mass, "matte rate / droplets per second (table)", d_mean, float(d.min()),
+                           float(d.max()), float(np.sum(w * (d_mean / d) ** 2)))
+    dist = (f.scale_std, f.scale_min, f.scale_max)
+    return FeedSummary(droplet_rate(f.mass_rate, f.mean_diameter, rho_p, *dist),
+                       mean_droplet_mass(f.mean_diameter, rho_p, *dist), "rho pi/6 d_mean^3 E[s^3]",
+                       f.mean_diameter, f.mean_diameter * f.scale_min, f.mean_diameter * f.scale_max,
+                       scale_factor_moment(1, *dist) / scale_factor_moment(3, *dist))
+
+
 def derived_numbers(case: Case) -> dict[str, list[Quantity]]:
     """Derived numbers of a case, grouped by topic (dict of lists of :class:`Quantity`)."""
     f, s, m, g = case.feed, case.slag, case.matte, case.geometry
@@ -64,18 +96,18 @@ def derived_numbers(case: Case) -> dict[str, list[Quantity]]:
                  "box slag mass / slag feed rate"),
     ]
 
-    rate = droplet_rate(f.mass_rate, f.mean_diameter, rho_p, *dist)
-    nominal = f.mass_rate / (rho_p * math.pi / 6.0 * f.mean_diameter**3)
+    summary = feed_summary(case)
+    nominal = f.mass_rate / (rho_p * math.pi / 6.0 * summary.mean_diameter**3)
     groups["feed"] = [
-        Quantity("droplets fed per second", rate, "1/s", "matte rate / mean droplet mass over the feed distribution"),
-        Quantity("droplets fed per second at d_mean", nominal, "1/s", "matte rate / mass of a d_mean droplet"),
-        Quantity("mean fed droplet mass", mean_droplet_mass(f.mean_diameter, rho_p, *dist), "kg",
-                 "rho pi/6 d_mean^3 E[s^3]"),
+        Quantity("droplets fed per second", summary.rate, "1/s",
+                 "matte rate / mean droplet mass over the feed distribution"),
+        Quantity("droplets fed per second at d_mean", nominal, "1/s",
+                 f"matte rate / mass of a d_mean = {summary.mean_diameter * 1e6:.4g} um droplet"),
+        Quantity("mean fed droplet mass", summary.mean_mass, "kg", summary.mean_mass_note),
         Quantity("matte volume feed", f.mass_rate / rho_p, "m^3/s", ""),
     ]
 
-    sizes = {"smallest fed": f.mean_diameter * f.scale_min, "mean fed": f.mean_diameter,
-             "largest fed": f.mean_diameter * f.scale_max}
+    sizes = {"smallest fed": summary.smallest, "mean fed": summary.mean_diameter, "largest fed": summary.largest}
     if case.coalescence.enabled:
         sizes["size limit"] = case.coalescence.size_limit
     settling = []
@@ -92,11 +124,11 @@ def derived_numbers(case: Case) -> dict[str, list[Quantity]]:
     groups["settling"] = settling
 
     # Dilute plume under the inlet: each size class k carries its volume flux Q_k at its own velocity v_k, so
-    # phi = sum Q_k / (A v_k) = Q/(A v(d_mean)) * E[s] / E[s^3] in the Stokes regime.
+    # phi = sum Q_k / (A v_k) = Q / (A v(d_mean)) * sum_k w_k (d_mean / d_k)^2 in the Stokes regime.
     area = math.pi * 0.25 * g.inlet_diameter**2
-    v_mean = stokes_velocity(f.mean_diameter, rho_p, s.density, mu)
+    v_mean = stokes_velocity(summary.mean_diameter, rho_p, s.density, mu)
     q = f.mass_rate / rho_p
-    phi_dilute = q / (area * v_mean) * scale_factor_moment(1, *dist) / scale_factor_moment(3, *dist)
+    phi_dilute = q / (area * v_mean) * summary.slowness_factor
     n = RICHARDSON_ZAKI_EXPONENT
     phi_peak = 1.0 / (1.0 + n)
     flux_peak = phi_peak * (1.0 - phi_peak) ** n
@@ -113,7 +145,7 @@ def derived_numbers(case: Case) -> dict[str, list[Quantity]]:
     groups["cluster under the inlet"] = [
         Quantity("volume fraction, dilute estimate", phi_dilute, "-", "Q / (A_inlet v_St) over the feed distribution"),
         Quantity("volume fraction, hindered (Richardson-Zaki)", phi_hindered, "-", note),
-        Quantity("collective-settling number (6/5) phi (R/a)^2", 1.2 * phi_dilute * (radius / (0.5 * f.mean_diameter)) ** 2,
+        Quantity("collective-settling number (6/5) phi (R/a)^2", 1.2 * phi_dilute * (radius / (0.5 * summary.mean_diameter)) ** 2,
                  "-", "> 1: the cloud falls as a plume (Nitsche & Batchelor 1997)"),
     ]
 

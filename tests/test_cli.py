@@ -51,3 +51,13 @@ def test_info_bad_override_exits_2(capsys):
 def test_console_script_runs():
     out = subprocess.run([sys.executable, "-m", "settler.cli", "cases"], capture_output=True, text=True, check=True)
     assert "simple" in out.stdout and "deep" in out.stdout
+
+
+def test_info_table_feed_counts_every_class(capsys):
+    from settler.cases import load_case
+    from settler.physics import table_droplet_rate
+
+    case = load_case("furnace")
+    f = case.feed
+    expected = table_droplet_rate(f.mass_rate, f.table_diameters, f.table_mass_fractions, case.matte.density)
+    assert _derived("furnace", capsys)["droplets fed per second"] == pytest.approx(expected, rel=1e-12)

@@ -64,3 +64,11 @@ def test_schedule_refuses_going_back_in_time():
     s.advance(1.0)
     with pytest.raises(ValueError, match="before"):
         s.advance(0.5)
+
+
+def test_table_droplet_rate_by_hand():
+    # two classes: 1 kg/s, 30 % by mass at 1 mm and 70 % at 0.1 mm, density 5000 kg/m^3
+    m1 = 5000.0 * math.pi / 6 * 1e-3**3
+    m2 = 5000.0 * math.pi / 6 * 1e-4**3
+    assert p.table_droplet_rate(1.0, [1e-3, 1e-4], [0.3, 0.7], 5000.0) == pytest.approx(0.3 / m1 + 0.7 / m2,
+                                                                                      rel=1e-14)

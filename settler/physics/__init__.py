@@ -19,7 +19,7 @@ from .coalescence import (FORM_LUO, FORM_SEED, PROBABILITY_FORMS, coalescence_pr
                           weber_number)
 from .constants import GAS_CONSTANT, MOLAR_MASS_CU, MOLAR_MASS_CU2S, MOLAR_MASS_FES, STANDARD_GRAVITY
 from .feed import (FeedSchedule, droplet_rate, mean_droplet_mass, sample_scale_factors, scale_factor_moment,
-                   scale_factor_pdf)
+                   scale_factor_pdf, table_droplet_rate)
 from .matte import (composition_from_masses, cu2s_fraction_from_density, cu2s_mass_fraction, density_at_age,
                     diameter_from_masses, matte_density, molar_mass_matte, reacted_mass, reaction_age,
                     reaction_fraction, relative_diameter, relative_diameter_at_age, relative_volume, species_masses)

@@ -45,6 +45,16 @@ def droplet_rate(mass_rate, mean_diameter, density, std=0.1, scale_min=0.7, scal
     return mass_rate / mean_droplet_mass(mean_diameter, density, std, scale_min, scale_max)
 
 
+def table_droplet_rate(mass_rate, diameters, mass_fractions, density):
+    """Droplets per second [1/s] of a feed split into size classes: sum_k mass_rate w_k / (rho pi/6 d_k^3).
+
+    diameters [m] and mass fractions w_k [-] (summing to 1) of the classes, e.g. a measured entrainment table.
+    """
+    d = np.asarray(diameters, dtype=float)
+    w = np.asarray(mass_fractions, dtype=float)
+    return float(np.sum(mass_rate * w / (density * math.pi / 6.0 * d**3)))
+
+
 @dataclass
 class FeedSchedule:
     """Insertion schedule that delivers ``mass_rate`` exactly on average.
