@@ -14,11 +14,13 @@ force on droplets, -V_p (grad p)_interp, plus the fluid's -eps grad p sum to -(g
 telescopes to zero in a periodic box (see tests/test_fulldem_coupling.py).
 
 **Self-induced velocity.** A droplet that pushes on the grid with force F sees, at its own position, a disturbance
-u_self = M_self F it created itself; using the disturbed velocity would make droplets not much smaller than sigma
-settle too fast (the error grows like d/sigma). Following the idea of Balachandar, Liu & Lakhote (2019, J. Comput.
-Phys. 376, 160) and Horwitz & Mani (2016, J. Comput. Phys. 318, 85), the undisturbed velocity is estimated as
-u_interp - M_self F. With the linear drag F = beta (u_undisturbed - v) this is the same as using u_interp with the
-reduced coefficient beta / (1 + beta M_self), which keeps the exact exponential drag integrator.
+u_self = M_self F it created itself, along the force the *fluid* receives, -F_drag; using the disturbed velocity
+would make droplets not much smaller than sigma settle too fast (the error grows like d/sigma). Following the idea
+of Balachandar, Liu & Lakhote (2019, J. Comput. Phys. 376, 160) and Horwitz & Mani (2016, J. Comput. Phys. 318,
+85), the undisturbed velocity is estimated as u_interp + M_self F_drag. With the linear drag
+F_drag = beta (u_undisturbed - v) this is the same as using u_interp with the increased coefficient
+beta / (1 - beta M_self), which keeps the exact exponential drag integrator. beta M_self = d f / (2 sqrt(pi) sigma)
+at low Re is at most about 0.6 with sigma >= d/2; it is capped at :data:`SELF_CORRECTION_CAP`.
 M_self is the Gaussian-regularised Stokeslet's self-mobility 1/(6 pi^(3/2) mu sigma) (Maxey & Patel 2001), times
 a *discrete* factor computed once per sigma/h by solving the grid's own periodic Stokes problem with FFTs
 (:func:`discrete_mobility_factor`), times an Oseen factor of the slip Reynolds number rho |u - v| sigma / mu
@@ -40,6 +42,8 @@ from scipy import integrate
 DEFAULT_CUT = 2.5
 #: Hasimoto (1959) coefficient of the periodic-array correction of a Stokeslet's mobility, 1 - 2.837 a / L.
 HASIMOTO = 2.837297
+#: Upper bound applied to beta M_self in the self-induced-velocity correction (the correction diverges at 1).
+SELF_CORRECTION_CAP = 0.9
 #: Largest stencil extent in nodes per axis that the work arrays are sized for.
 MAX_STENCIL = 64
 
@@ -299,12 +303,12 @@ def discrete_mobility_factor(sigma_cells_ratio: float, cut: float = DEFAULT_CUT,
 
 @njit(cache=True)
 def corrected_drag_coefficient(beta, sigma, viscosity, discrete_factor, oseen):
-    """beta / (1 + beta M_self): the drag coefficient to use with the interpolated (disturbed) fluid velocity [kg/s].
+    """beta / (1 - beta M_self): the drag coefficient to use with the interpolated (disturbed) fluid velocity [kg/s].
 
     M_self = discrete_factor * oseen / (6 pi^1.5 mu sigma) is the droplet's own self-mobility on the grid.
     """
     m_self = discrete_factor * oseen * gaussian_self_mobility(sigma, viscosity)
-    return beta / (1.0 + beta * m_self)
+    return beta / (1.0 - min(beta * m_self, SELF_CORRECTION_CAP))
 
 
 def thread_count() -> int:

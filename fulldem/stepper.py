@@ -1,0 +1,371 @@
+"""The coupled CFD-DEM step: slag on the grid, droplets as soft spheres, two-way coupled (model A).
+
+One fluid step of length dt, from droplets at x^n and fluid (u^n, p^n):
+
+1. feed: droplets due by the feed schedule are inserted over the inlet disk without overlaps;
+2. the droplets' volume and volume flux are deposited on the faces at x^n (void fraction eps^n, flux q^n);
+3. the fluid is advanced with eps^n (and last step's eps as ``eps_faces_old``), q^n and the drag reaction owed
+   from the previous step, giving u^{n+1}, p^{n+1};
+4. at x^n, with the *same* weights, each droplet receives the fluid velocity u^{n+1} and the pressure force
+   V_p interp(-grad p^{n+1} + b); its drag coefficient beta (Schiller-Naumann, Di Felice hindrance, corrected for
+   its own disturbance) is computed from them;
+5. DEM sub-steps of length dt/n_sub integrate contacts, buoyant weight, pressure force and the drag (exactly, with
+   the exponential integrator), accumulating each droplet's drag impulse J;
+6. -J is deposited at x^n as the face force the fluid receives in the next step (so it is owed, not lost);
+7. droplets touching the bottom are removed as *settled*, those leaving by the outlet as *lost*.
+
+Momentum: droplets and fluid exchange drag and pressure forces through adjoint weights, so the total momentum
+(fluid + droplets + the impulse owed to the fluid) changes only by the imposed body forces, to round-off
+(tests/test_fulldem_stepper.py). Matte mass: fed = in slag + settled + lost, counted droplet by droplet.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from settler.physics import STANDARD_GRAVITY, FeedSchedule, schiller_naumann_velocity, stokes_velocity
+
+from . import coupling as cp
+from . import fluid as fl
+from .contacts import effective_mass, stable_step, stiffness_for_overlap
+from .dem import DemStepper, droplet_masses
+from .droplets import DropletStore
+from .feeding import SIDES, classify_exits, draw_inlet_candidates, place_without_overlap
+from .forces import DRAG_LAWS, drag_coefficients
+from .grid import Grid
+from .neighbours import reorder_store
+
+#: Ratios sigma/h at which the grid's self-mobility factor is tabulated (see fulldem.coupling).
+MOBILITY_RATIOS = np.array([0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0])
+
+
+class CoupledDem(DemStepper):
+    """DEM stepper whose force also includes a per-droplet ``external`` force (cap, 3) [N] while it is set.
+
+    The coupling sets it (buoyant weight and pressure force, which differ per droplet) for the sub-steps of one
+    fluid step; droplets are not re-sorted during those sub-steps, so the array stays aligned with the store.
+    """
+
+    external = None
+
+    def compute_forces(self) -> float:
+        worst = super().compute_forces()
+        if self.external is not None:
+            n = self.store.count
+            self.force[:n] += self.external[:n]
+        return worst
+
+
+@dataclass
+class Counters:
+    """Matte mass bookkeeping [kg] and event counts since t = 0."""
+
+    mass_fed: float = 0.0
+    mass_settled: float = 0.0
+    mass_lost: float = 0.0
+    mass_reacted: float = 0.0
+    fed: int = 0
+    settled: int = 0
+    lost: int = 0
+
+
+class StepDiagnostics(dict):
+    """Per-step numbers: max_cell_reynolds, max_cfl, max_overlap_ratio, pressure_iterations, feed_backlog..."""
+
+
+class Simulation:
+    """A coupled run of one case. Construct, then call :meth:`advance` (or :meth:`step`).
+
+    case: a :class:`settler.cases.Case`. Keyword options, mainly for verification set-ups:
+    box: (size, lower) of the computational box [m] (default: the case's geometry at the origin);
+    periodic: (3,) bools (periodic axes have no walls, inlet or outlet);
+    feed: insert droplets over the inlet at the case's rate (default: True when feed.mass_rate > 0);
+    inlet, outlet: use the case's slag inlet/outlet patches (default True where the box is the case's);
+    absorbing_bottom: remove droplets touching the bottom as settled (default: True unless z is periodic);
+    body_force: uniform mean pressure gradient b [N/m^3] on the mixture (fluid eps b, droplets V_p b);
+    gravity: gravity vector [m/s^2] (default (0, 0, -g)).
+    """
+
+    def __init__(self, case, *, box=None, periodic=(False, False, False), feed=None, inlet=None, outlet=None,
+                 absorbing_bottom=None, body_force=(0.0, 0.0, 0.0), gravity=None, droplets=None):
+        self.case = case
+        fd = case.fulldem
+        g = case.geometry
+        self.own_box = box is None
+        size, lower = ((g.width, g.depth, g.height), (0.0, 0.0, 0.0)) if box is None else box
+        self.grid = Grid.for_box(size, fd.cell_size, lower, periodic)
+        self.lower = np.asarray(self.grid.lower, dtype=float)
+        self.upper = self.grid.upper
+        self.periodic = np.asarray(periodic, dtype=np.bool_)
+        self.density = case.slag.density
+        self.viscosity = case.slag_viscosity
+        self.gravity = np.array((0.0, 0.0, -STANDARD_GRAVITY) if gravity is None else gravity, dtype=float)
+        self.body_force = np.asarray(body_force, dtype=float)
+        self.time = 0.0
+        self.steps = 0
+        self.counters = Counters()
+        self.store = droplets if droplets is not None else DropletStore(4096)
+
+        # boundaries
+        use_inlet = (self.own_box and case.slag.feed_rate > 0.0) if inlet is None else inlet
+        use_outlet = (self.own_box and case.has_outlet) if outlet is None else outlet
+        inlet_disk = fl.InletDisk(case.inlet_center, 0.5 * g.inlet_diameter) if use_inlet else None
+        outlet_disk = None
+        self.outlet_code = (-1, 0.0, 0.0, 0.0, 0.0)
+        if use_outlet:
+            side = SIDES[g.outlet_side]
+            transverse = 0.5 * (g.depth if side < 2 else g.width)
+            outlet_disk = fl.OutletDisk(g.outlet_side, (transverse, g.outlet_height), 0.5 * g.outlet_diameter)
+            axis = 0 if side < 2 else 1
+            plane = self.lower[axis] if side % 2 == 0 else self.upper[axis]
+            self.outlet_code = (side, plane, transverse, g.outlet_height, 0.5 * g.outlet_diameter)
+        self.boundary = fl.make_boundary(self.grid, inlet=inlet_disk, outlet=outlet_disk,
+                                         inflow_flux=case.slag.feed_rate / case.slag.density if use_inlet else 0.0)
+        self.fluid = fl.rest_state(self.grid)
+        self.absorbing_bottom = (not periodic[2]) if absorbing_bottom is None else absorbing_bottom
+
+        # feed
+        f = case.feed
+        self.feed_on = (f.mass_rate > 0.0) if feed is None else feed
+        self.schedule = FeedSchedule(f.mass_rate, f.mean_diameter, case.matte.density, f.scale_std, f.scale_min,
+                                     f.scale_max, seed=f.seed)
+        self.backlog = np.empty(0)
+        self.rng = np.random.default_rng(f.seed + 1)
+
+        # contacts and the DEM step
+        d_ref = f.mean_diameter
+        excess = case.matte.density - case.slag.density
+        self.stiffness_ref = stiffness_for_overlap(fd.max_overlap, d_ref, excess, fd.load_factor,
+                                                   STANDARD_GRAVITY)
+        d_min = f.mean_diameter * f.scale_min
+        m_min = case.matte.density * math.pi / 6.0 * d_min**3
+        k_min = self.stiffness_ref * (d_min / d_ref) ** 2
+        self.contact_step = stable_step(k_min, effective_mass(m_min, m_min), fd.contact_steps)
+        dem_step = fd.dem_step if fd.dem_step > 0.0 else self.contact_step
+        self.substeps = max(1, math.ceil(fd.fluid_step / dem_step - 1e-9))
+        self.dt = fd.fluid_step
+        self.h = self.dt / self.substeps
+        side = self.outlet_code[0]
+        outlet_for_dem = (side, self.outlet_code[3], self.outlet_code[2], self.outlet_code[4]) if side >= 0 else None
+        self.dem = CoupledDem(self.store, self.lower, self.grid.size, self.periodic, self.h, self.stiffness_ref,
+                              d_ref, fd.restitution, 0.25 * d_ref, np.zeros(3),
+                              absorbing_bottom=self.absorbing_bottom, outlet=outlet_for_dem,
+                              sort_on_rebuild=False)
+
+        # coupling tables and work arrays
+        self.kernel = (fd.sigma_cells, fd.sigma_diameter, cp.DEFAULT_CUT)
+        self.mobility = np.array([cp.discrete_mobility_factor(r) for r in MOBILITY_RATIOS])
+        self.oseen_logs, self.oseen_values = cp.oseen_table()
+        self.drag_law = DRAG_LAWS[case.drag.law]
+        self.viscosity_ratio = case.matte.viscosity / self.viscosity if case.drag.fluid_drop else 0.0
+        self.eps_old = None
+        self.owed_force = self.grid.zeros_faces()  # -J deposited, applied in the next fluid step [N/m^3]
+        self.last = StepDiagnostics()
+        self._alloc(self.store.capacity)
+
+    # ------------------------------------------------------------------------------------------------ helpers
+    def _alloc(self, capacity):
+        self.beta = np.zeros(capacity)
+        self.fluid_velocity = np.zeros((capacity, 3))
+        self.impulse = np.zeros((capacity, 3))
+        self.external = np.zeros((capacity, 3))
+        self.start_position = np.zeros((capacity, 3))
+        self.per_droplet = np.zeros(capacity)
+        self.mass = np.zeros(capacity)
+        self.exit_code = np.zeros(capacity, dtype=np.int64)
+
+    def _ensure_capacity(self):
+        if self.beta.shape[0] < self.store.capacity:
+            self._alloc(self.store.capacity)
+
+    def _grid_args(self):
+        return (self.grid.spacing, self.lower, np.asarray(self.grid.shape), self.periodic)
+
+    def deposit(self, positions, values, component, out):
+        """Deposit per-droplet ``values`` (already divided by the cell volume) on ``component`` (0-2 faces, 3 cells)."""
+        scratch = np.zeros((cp.thread_count(), *out.shape))
+        cp.deposit(positions, self.store.diameter, values, self.store.count, component, out, *self._grid_args(),
+                   *self.kernel, scratch)
+        return out
+
+    def interpolate(self, positions, field, component, out):
+        cp.interpolate(positions, self.store.diameter, self.store.count, component, field, out, *self._grid_args(),
+                       *self.kernel)
+        return out
+
+    def void_fraction(self):
+        """Void fraction on faces (3 arrays) and at cells from the droplets' current positions [-]."""
+        s, n = self.store, self.store.count
+        volume = self.per_droplet
+        volume[:n] = math.pi / 6.0 * s.diameter[:n] ** 3 / self.grid.cell_volume
+        faces = [1.0 - self.deposit(s.position, volume, a, np.zeros(self.grid.face_shape(a))) for a in range(3)]
+        cells = 1.0 - self.deposit(s.position, volume, 3, self.grid.zeros_cells())
+        return faces, cells
+
+    def particle_flux(self):
+        s, n = self.store, self.store.count
+        out = []
+        for a in range(3):
+            values = math.pi / 6.0 * s.diameter[:n] ** 3 * s.velocity[:n, a] / self.grid.cell_volume
+            buf = np.zeros(s.capacity)
+            buf[:n] = values
+            out.append(self.deposit(s.position, buf, a, np.zeros(self.grid.face_shape(a))))
+        return out
+
+    # ------------------------------------------------------------------------------------------------ feed & exits
+    def insert(self, diameters):
+        """Insert droplets of the given diameters over the inlet disk without overlap; unplaced ones wait."""
+        diameters = np.concatenate([self.backlog, diameters])
+        if diameters.size == 0:
+            return 0
+        fd, g = self.case.fulldem, self.case.geometry
+        top = self.upper[2]
+        cx, cy = self.case.inlet_center
+        candidates = draw_inlet_candidates(self.rng, diameters, (cx, cy), 0.5 * g.inlet_diameter, top,
+                                           fd.insertion_layer, fd.insertion_tries)
+        reach = max(float(diameters.max()), float(self.store.diameter[: self.store.count].max())
+                    if self.store.count else 0.0)
+        lower = np.array([cx - 0.5 * g.inlet_diameter, cy - 0.5 * g.inlet_diameter,
+                          top - fd.insertion_layer - diameters.max()])
+        upper = np.array([cx + 0.5 * g.inlet_diameter, cy + 0.5 * g.inlet_diameter, top])
+        chosen = np.empty(len(diameters), dtype=np.int64)
+        place_without_overlap(candidates, diameters, self.store.position, self.store.diameter, self.store.count,
+                              lower, upper, reach, chosen)
+        ok = chosen >= 0
+        self.backlog = diameters[~ok]
+        if not ok.any():
+            return 0
+        positions = candidates[np.nonzero(ok)[0], chosen[ok]]
+        d = diameters[ok]
+        rho = self.case.matte.density
+        v_settle = np.array([schiller_naumann_velocity(x, rho, self.density, self.viscosity) for x in d])
+        velocity = np.zeros((len(d), 3))
+        velocity[:, 2] = -v_settle
+        self.store.add(positions, d, rho, velocity=velocity)
+        self.counters.mass_fed += float(np.sum(rho * math.pi / 6.0 * d**3))
+        self.counters.fed += len(d)
+        self._ensure_capacity()
+        self.dem.droplets_changed()
+        return len(d)
+
+    def remove_exits(self):
+        s = self.store
+        n = s.count
+        if n == 0:
+            return
+        side, plane, transverse, height, radius = self.outlet_code
+        bottom = self.lower[2] if self.absorbing_bottom else -math.inf
+        leaving = classify_exits(s.position, s.diameter, n, bottom, side, plane, transverse, height, radius,
+                                 self.exit_code)
+        if leaving == 0:
+            return
+        code = self.exit_code[:n]
+        mass = s.density[:n] * math.pi / 6.0 * s.diameter[:n] ** 3
+        self.counters.mass_settled += float(mass[code == 1].sum())
+        self.counters.mass_lost += float(mass[code == 2].sum())
+        self.counters.settled += int((code == 1).sum())
+        self.counters.lost += int((code == 2).sum())
+        s.remove(code > 0)
+        self.dem.droplets_changed()
+
+    # ------------------------------------------------------------------------------------------------ the step
+    def step(self):
+        """Advance the coupled system by one fluid step dt (see the module docstring)."""
+        fd = self.case.fulldem
+        if self.feed_on:
+            self.insert(self.schedule.advance(self.time + self.dt))
+        s = self.store
+        self._ensure_capacity()
+        if s.count:
+            reorder_store(s, self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
+            self.dem.droplets_changed()
+        n = s.count
+        eps_faces, eps_cells = self.void_fraction()
+        if min(float(e.min()) for e in eps_faces) <= 0.0:
+            raise FloatingPointError("void fraction reached zero on a face: droplets overfill a cell")
+        flux = self.particle_flux()
+        state, fdiag = fl.step(self.grid, self.fluid, self.boundary, self.density, self.viscosity, self.dt,
+                               eps_faces=eps_faces, particle_flux=flux, force=self.owed_force,
+                               body_force=self.body_force, eps_faces_old=self.eps_old,
+                               advection="koren" if fd.advection else "none")
+        self.fluid = state
+        self.eps_old = eps_faces
+        self.momentum_eps = eps_faces
+
+        # what the droplets feel, interpolated at x^n with the deposition weights
+        self.start_position[:n] = s.position[:n]
+        pressure_force = fl.pressure_force_density(self.grid, state.p, self.body_force)
+        volume = math.pi / 6.0 * s.diameter[:n] ** 3
+        droplet_masses(s.diameter, s.density, n, self.mass)
+        for a in range(3):
+            self.interpolate(s.position, (state.u, state.v, state.w)[a], a, self.per_droplet)
+            self.fluid_velocity[:n, a] = self.per_droplet[:n]
+            self.interpolate(s.position, pressure_force[a], a, self.per_droplet)
+            self.external[:n, a] = volume * self.per_droplet[:n] + (self.mass[:n] - self.density * volume) \
+                * self.gravity[a]
+        phi = self.interpolate(s.position, 1.0 - eps_cells, 3, self.per_droplet)[:n].copy()
+        own = np.zeros(s.capacity)
+        cp.self_weight(s.position, s.diameter, n, 3, own, *self._grid_args(), *self.kernel)
+        eps_around = np.clip(1.0 - (phi - own[:n] * volume / self.grid.cell_volume), 0.0, 1.0)
+        eps_buf = np.ones(s.capacity)
+        eps_buf[:n] = eps_around
+        drag_coefficients(s.diameter, s.velocity, self.fluid_velocity, eps_buf, n, self.density, self.viscosity,
+                          self.drag_law, fd.hindrance == "di_felice", self.viscosity_ratio, self.grid.spacing,
+                          fd.sigma_cells, fd.sigma_diameter, fd.self_correction, MOBILITY_RATIOS, self.mobility,
+                          self.oseen_logs, self.oseen_values, self.beta)
+
+        # DEM sub-steps with the external force held over the fluid step
+        self.impulse[:n] = 0.0
+        self.dem.set_drag(self.beta)
+        self.dem.external = self.external
+        self.dem.compute_forces()
+        worst = 0.0
+        try:
+            for _ in range(self.substeps):
+                self.dem.step(self.fluid_velocity, self.impulse)
+                worst = max(worst, self.dem.max_overlap_ratio)
+        finally:
+            self.dem.external = None
+
+        # the fluid is owed -J, deposited where the droplets felt the fluid
+        self.owed_force = []
+        for a in range(3):
+            self.per_droplet[:n] = -self.impulse[:n, a] / (self.dt * self.grid.cell_volume)
+            self.owed_force.append(self.deposit(self.start_position, self.per_droplet, a,
+                                                np.zeros(self.grid.face_shape(a))))
+        self.time += self.dt
+        self.steps += 1
+        self.remove_exits()
+        self.last = StepDiagnostics(max_cell_reynolds=fdiag.cell_reynolds, max_cfl=fdiag.courant,
+                                    max_overlap_ratio=worst, pressure_iterations=fdiag.pressure_iterations,
+                                    feed_backlog=len(self.backlog))
+        if not np.isfinite(s.position[: s.count]).all() or not np.isfinite(state.u).all():
+            raise FloatingPointError(f"non-finite state at t = {self.time:.6g} s")
+        if worst > fd.overlap_abort:
+            raise FloatingPointError(f"runaway overlap: {worst:.3f} of a diameter at t = {self.time:.6g} s "
+                                     f"(fulldem.overlap_abort = {fd.overlap_abort})")
+        return self.last
+
+    # ------------------------------------------------------------------------------------------------ diagnostics
+    def momentum(self):
+        """Total momentum [kg m/s]: fluid (with the void fraction of its last step) + droplets + impulse owed."""
+        s, n = self.store, self.store.count
+        mass = s.density[:n] * math.pi / 6.0 * s.diameter[:n] ** 3
+        droplets = (mass[:, None] * s.velocity[:n]).sum(axis=0)
+        fluid = fl.total_momentum(self.grid, self.fluid, self.density, getattr(self, "momentum_eps", None))
+        owed = np.array([float(np.sum(self.owed_force[a][fl._unique_faces(self.grid, a)])) for a in range(3)])
+        return fluid + droplets + owed * self.dt * self.grid.cell_volume
+
+    def mass_in_slag(self):
+        s, n = self.store, self.store.count
+        return float(np.sum(s.density[:n] * math.pi / 6.0 * s.diameter[:n] ** 3))
+
+    def terminal_velocity(self, diameter):
+        """Single-droplet terminal velocity in the case's slag and drag law [m/s] (positive down)."""
+        rho = self.case.matte.density
+        if self.case.drag.law == "stokes":
+            return stokes_velocity(diameter, rho, self.density, self.viscosity)
+        return schiller_naumann_velocity(diameter, rho, self.density, self.viscosity)
