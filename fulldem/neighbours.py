@@ -1,0 +1,429 @@
+"""Verlet neighbour lists for polydisperse droplets, built by cell binning.
+
+A list holds every pair closer than (d_i + d_j)/2 + skin at build time, in compressed-sparse-row form: the partners
+of droplet i are ``index[start[i]:start[i + 1]]``. It stays valid while no droplet has moved (plus grown in radius)
+by more than skin/2 since the build (:func:`needs_rebuild`), so contacts are found without searching cells every step.
+
+* *half* list: each pair once (for pair loops that update both droplets);
+* *full* list: each pair in both rows (for loops over droplets that write only their own row: no write races).
+
+Polydispersity. Cells have the side ``cell_size >= d_cell + skin`` where d_cell is a typical large diameter (the
+99th percentile by default, :func:`cell_size_for`): a pair of droplets no larger than d_cell is always found in the
+3 x 3 x 3 block of cells around either one. A pair that involves a larger droplet is owned by the larger of the two,
+which searches every cell within (d_large + skin) of its own; the smaller one does not look for it. So nothing is
+missed however large the coalesced droplets grow (2 mm in the cubic case, 40 mm in the deep one), and the many fed
+droplets still search only 27 small cells.
+
+Periodic axes use the minimum image (the box must be at least twice the largest cutoff long on those axes); the
+cells of a periodic axis divide it exactly. On bounded axes the cells span the droplets' bounding box only (the
+settler's droplets occupy a small part of the box early on), and positions outside are clamped into the end cells,
+which cannot lose a pair (clamping never increases a distance in cell units).
+
+Arrays: ``start`` (n + 1,) int64, ``index`` (capacity,) int32 (capacity >= start[n], grown by doubling when a
+build needs more), positions [m] (cap, 3), diameters [m] (cap,).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+#: Cells per droplet above which the cell size is enlarged (keeps the cell arrays small in mostly empty boxes).
+MAX_CELLS_PER_DROPLET = 8
+
+
+def cell_size_for(diameter, skin, quantile=0.99, cap=None) -> float:
+    """Cell side [m] for binning: the ``quantile`` of the diameters [m] (at most ``cap`` [m]) plus the skin [m].
+
+    Droplets larger than the cell's diameter are handled by a wider search of their own, so any value is correct;
+    this one keeps the common droplets' search to 27 cells of about their own size.
+    """
+    diameter = np.asarray(diameter, dtype=float)
+    typical = float(np.quantile(diameter, quantile)) if diameter.size else 0.0
+    if cap is not None:
+        typical = min(typical, float(cap))
+    return typical + float(skin)
+
+
+@njit(cache=True, inline="always")
+def _minimum_image(delta, period, inverse_period):
+    """Shortest periodic copy of a separation component (period 0 with inverse 0: a bounded axis, unchanged)."""
+    return delta - period * np.rint(delta * inverse_period)
+
+
+@njit(cache=True, inline="always")
+def _axis_range(cell, reach, ncell, periodic):
+    """Cells to visit along one axis: (first, last, wrap). Periodic: each cell at most once, even if reach is wide."""
+    if periodic:
+        if 2 * reach + 1 >= ncell:
+            return 0, ncell - 1, False
+        return cell - reach, cell + reach, True
+    return max(0, cell - reach), min(ncell - 1, cell + reach), False
+
+
+@njit(cache=True, parallel=True)
+def bin_droplets(position, count, grid_lower, cell_size, shape, periodic, cell_xyz, cell_id):
+    """Cell coordinates (count, 3) int64 and linear cell index (count,) of each droplet (written in place).
+
+    Periodic axes wrap; bounded axes clamp to the end cells. Linear index = ix + nx (iy + ny iz).
+    """
+    for p in prange(count):
+        linear = 0
+        stride = 1
+        for a in range(3):
+            c = int(math.floor((position[p, a] - grid_lower[a]) / cell_size[a]))
+            n = shape[a]
+            if periodic[a]:
+                c = c % n
+                if c < 0:
+                    c += n
+            else:
+                c = min(max(c, 0), n - 1)
+            cell_xyz[p, a] = c
+            linear += c * stride
+            stride *= n
+        cell_id[p] = linear
+
+
+@njit(cache=True)
+def counting_sort(cell_id, count, cell_start, cell_droplets):
+    """Stable counting sort by cell: the droplets of cell c are ``cell_droplets[cell_start[c]:cell_start[c + 1]]``.
+
+    cell_start (ncell + 1,) int64 and cell_droplets (>= count,) int64 are written in place.
+    """
+    ncell = cell_start.shape[0] - 1
+    for c in range(ncell + 1):
+        cell_start[c] = 0
+    for p in range(count):
+        cell_start[cell_id[p] + 1] += 1
+    for c in range(ncell):
+        cell_start[c + 1] += cell_start[c]
+    # cell_start[c] is used as the insertion cursor of cell c, then shifted back
+    for p in range(count):
+        c = cell_id[p]
+        cell_droplets[cell_start[c]] = p
+        cell_start[c] += 1
+    for c in range(ncell, 0, -1):
+        cell_start[c] = cell_start[c - 1]
+    cell_start[0] = 0
+
+
+@njit(cache=True, inline="always")
+def _pair_within(position, diameter, i, j, skin, period, inverse_period):
+    dx = _minimum_image(position[j, 0] - position[i, 0], period[0], inverse_period[0])
+    dy = _minimum_image(position[j, 1] - position[i, 1], period[1], inverse_period[1])
+    dz = _minimum_image(position[j, 2] - position[i, 2], period[2], inverse_period[2])
+    cut = 0.5 * (diameter[i] + diameter[j]) + skin
+    return dx * dx + dy * dy + dz * dz < cut * cut
+
+
+@njit(cache=True, parallel=True)
+def scan_small(position, diameter, count, is_large, skin, period, inverse_period, shape, periodic, cell_xyz,
+               cell_start, cell_droplets, half, start, index, counts):
+    """Pairs between droplets of at most the cell's diameter, from the 27 cells around each droplet.
+
+    Count pass (``index`` of length 0): writes counts[i]. Fill pass: writes row i from ``start[i]`` on. A half list
+    keeps j > i; large droplets are skipped (their pairs are found by :func:`scan_large`).
+    """
+    fill = index.shape[0] > 0
+    for i in prange(count):
+        if is_large[i]:
+            counts[i] = 0
+            continue
+        found = 0
+        cursor = start[i]
+        zf, zl, zw = _axis_range(cell_xyz[i, 2], 1, shape[2], periodic[2])
+        yf, yl, yw = _axis_range(cell_xyz[i, 1], 1, shape[1], periodic[1])
+        xf, xl, xw = _axis_range(cell_xyz[i, 0], 1, shape[0], periodic[0])
+        for tz in range(zf, zl + 1):
+            cz = tz % shape[2] if zw else tz
+            for ty in range(yf, yl + 1):
+                cy = ty % shape[1] if yw else ty
+                row = shape[0] * (cy + shape[1] * cz)
+                for tx in range(xf, xl + 1):
+                    cx = tx % shape[0] if xw else tx
+                    cell = cx + row
+                    for k in range(cell_start[cell], cell_start[cell + 1]):
+                        j = cell_droplets[k]
+                        if j == i or (half and j < i) or is_large[j]:
+                            continue
+                        if _pair_within(position, diameter, i, j, skin, period, inverse_period):
+                            if fill:
+                                index[cursor] = j
+                                cursor += 1
+                            found += 1
+        counts[i] = found
+
+
+@njit(cache=True)
+def scan_large(position, diameter, large, skin, period, inverse_period, cell_size, shape, periodic, cell_xyz,
+               cell_start, cell_droplets, is_large, half, index, cursor, counts):
+    """Pairs owned by the droplets larger than the cell's diameter (serial: they are few).
+
+    A pair with a large droplet is owned by the larger of the two (ties: the lower index), which searches every cell
+    within d_large + skin. Count pass (``index`` of length 0): adds to counts. Fill pass: appends to rows at
+    ``cursor`` (and advances it); a full list also appends the owner to the partner's row.
+    """
+    fill = index.shape[0] > 0
+    for q in range(large.shape[0]):
+        i = large[q]
+        reach = diameter[i] + skin
+        zf, zl, zw = _axis_range(cell_xyz[i, 2], int(math.ceil(reach / cell_size[2])), shape[2], periodic[2])
+        yf, yl, yw = _axis_range(cell_xyz[i, 1], int(math.ceil(reach / cell_size[1])), shape[1], periodic[1])
+        xf, xl, xw = _axis_range(cell_xyz[i, 0], int(math.ceil(reach / cell_size[0])), shape[0], periodic[0])
+        for tz in range(zf, zl + 1):
+            cz = tz % shape[2] if zw else tz
+            for ty in range(yf, yl + 1):
+                cy = ty % shape[1] if yw else ty
+                row = shape[0] * (cy + shape[1] * cz)
+                for tx in range(xf, xl + 1):
+                    cx = tx % shape[0] if xw else tx
+                    cell = cx + row
+                    for k in range(cell_start[cell], cell_start[cell + 1]):
+                        j = cell_droplets[k]
+                        if j == i:
+                            continue
+                        if is_large[j] and (diameter[j] > diameter[i] or (diameter[j] == diameter[i] and j < i)):
+                            continue  # j owns this pair
+                        if not _pair_within(position, diameter, i, j, skin, period, inverse_period):
+                            continue
+                        if fill:
+                            index[cursor[i]] = j
+                            cursor[i] += 1
+                        counts[i] += 1
+                        if not half:
+                            if fill:
+                                index[cursor[j]] = i
+                                cursor[j] += 1
+                            counts[j] += 1
+
+
+@njit(cache=True, parallel=True)
+def max_travel(position, reference_position, diameter, reference_diameter, count, period, inverse_period):
+    """Largest |x - x_ref| + max(0, (d - d_ref)/2) over the droplets [m] (minimum image on periodic axes).
+
+    The list stays valid while this is at most skin/2: two droplets then cannot have closed their gap by more
+    than the skin.
+    """
+    nchunk = min(count, 64)
+    if nchunk == 0:
+        return 0.0
+    worst = np.zeros(nchunk)
+    for c in prange(nchunk):
+        local = 0.0
+        for p in range(c * count // nchunk, (c + 1) * count // nchunk):
+            d2 = 0.0
+            for a in range(3):
+                delta = _minimum_image(position[p, a] - reference_position[p, a], period[a], inverse_period[a])
+                d2 += delta * delta
+            travel = math.sqrt(d2) + max(0.0, 0.5 * (diameter[p] - reference_diameter[p]))
+            local = max(local, travel)
+        worst[c] = local
+    return worst.max()
+
+
+@njit(cache=True, parallel=True)
+def wrap_positions(position, count, lower, period):
+    """Move droplets back into the box on periodic axes (period [m] > 0 there, 0 on bounded axes)."""
+    for p in prange(count):
+        for a in range(3):
+            if period[a] > 0.0:
+                position[p, a] = lower[a] + (position[p, a] - lower[a]) % period[a]
+
+
+def _grow(array, needed, fill=0):
+    """``array`` if it holds ``needed`` entries, else a doubled copy-free replacement (contents not kept)."""
+    if array.shape[0] >= needed:
+        return array
+    size = max(array.shape[0], 1)
+    while size < needed:
+        size *= 2
+    shape = (size,) + array.shape[1:]
+    return np.full(shape, fill, dtype=array.dtype)
+
+
+class NeighbourList:
+    """A Verlet list with its binning work arrays, rebuilt in place.
+
+    Attributes: ``start`` (n + 1,) int64 and ``index`` (capacity,) int32 (CSR rows; capacity doubles when a build
+    needs more), ``half`` (bool), ``skin`` [m], ``count`` (droplets at the last build), ``builds`` (number of
+    builds), ``reference_position`` (cap, 3) [m] and ``reference_diameter`` (cap,) [m] at the last build,
+    ``cell_size`` (3,) [m] and ``shape`` (3,) of the last binning.
+
+    Geometry: ``box_lower`` (3,) [m], ``box_size`` (3,) [m], ``periodic`` (3,) bool.
+    """
+
+    def __init__(self, box_lower, box_size, periodic, skin, half=True, cell_diameter=None, index_capacity=1024):
+        self.box_lower = np.asarray(box_lower, dtype=float).copy()
+        self.box_size = np.asarray(box_size, dtype=float).copy()
+        self.periodic = np.asarray(periodic, dtype=bool).copy()
+        self.period = np.where(self.periodic, self.box_size, 0.0)
+        self.inverse_period = np.where(self.periodic, 1.0 / self.box_size, 0.0)
+        if skin <= 0.0:
+            raise ValueError(f"neighbours: skin = {skin} m must be positive")
+        self.skin = float(skin)
+        self.half = bool(half)
+        self.cell_diameter = cell_diameter  # None: the 99th percentile of the diameters at each build
+        self.start = np.zeros(1, dtype=np.int64)
+        self.index = np.zeros(max(int(index_capacity), 1), dtype=np.int32)
+        self.count = 0
+        self.builds = 0
+        self.reference_position = np.zeros((0, 3))
+        self.reference_diameter = np.zeros(0)
+        self.cell_size = np.ones(3)
+        self.shape = np.ones(3, dtype=np.int64)
+        self._cell_xyz = np.zeros((0, 3), dtype=np.int64)
+        self._cell_id = np.zeros(0, dtype=np.int64)
+        self._cell_start = np.zeros(2, dtype=np.int64)
+        self._cell_droplets = np.zeros(0, dtype=np.int64)
+        self._counts = np.zeros(0, dtype=np.int64)
+        self._extra = np.zeros(0, dtype=np.int64)
+        self._cursor = np.zeros(0, dtype=np.int64)
+        self._is_large = np.zeros(0, dtype=np.bool_)
+
+    # ------------------------------------------------------------------ binning
+    def _layout(self, position, diameter, count):
+        """Choose the cells: side >= d_cell + skin, exact division of periodic axes, bounding box on bounded axes."""
+        if self.cell_diameter is None:
+            d_cell = float(np.quantile(diameter[:count], 0.99)) if count else 0.0
+        else:
+            d_cell = float(self.cell_diameter)
+        side = d_cell + self.skin
+        pos = position[:count]
+        lo = np.where(self.periodic, self.box_lower, pos.min(axis=0) if count else self.box_lower)
+        extent = np.where(self.periodic, self.box_size, (np.ptp(pos, axis=0) if count else 0.0))
+        budget = MAX_CELLS_PER_DROPLET * count + 1000
+        while True:
+            shape = np.where(self.periodic, np.maximum(1, np.floor(extent / side)), np.floor(extent / side) + 1)
+            shape = np.maximum(shape, 1).astype(np.int64)
+            if np.prod(shape.astype(float)) <= budget:
+                break
+            side *= 1.25
+        cell = np.where(self.periodic, extent / shape, side)
+        self.grid_lower, self.cell_size, self.shape, self.cell_diameter_used = lo, cell, shape, d_cell
+        return d_cell
+
+    def _bin(self, position, count):
+        self._cell_xyz = _grow(self._cell_xyz, count)
+        self._cell_id = _grow(self._cell_id, count)
+        self._cell_droplets = _grow(self._cell_droplets, count)
+        ncell = int(np.prod(self.shape))
+        self._cell_start = _grow(self._cell_start, ncell + 1)
+        cell_start = self._cell_start[: ncell + 1]
+        bin_droplets(position, count, self.grid_lower, self.cell_size, self.shape, self.periodic, self._cell_xyz,
+                     self._cell_id)
+        counting_sort(self._cell_id, count, cell_start, self._cell_droplets)
+        return cell_start
+
+    def spatial_order(self, position, diameter, count) -> np.ndarray:
+        """A permutation (count,) that sorts the droplets by cell (x fastest), for memory locality in the kernels."""
+        self._layout(position, diameter, count)
+        self._bin(position, count)
+        return self._cell_droplets[:count].copy()
+
+    # ------------------------------------------------------------------ building
+    def build(self, position, diameter, count) -> None:
+        """(Re)build the list for the first ``count`` droplets (positions [m] (cap, 3), diameters [m] (cap,))."""
+        d_cell = self._layout(position, diameter, count)
+        largest = float(diameter[:count].max()) if count else 0.0
+        cut = largest + self.skin
+        if np.any(self.periodic & (self.box_size < 2.0 * cut)):
+            raise ValueError(f"neighbours: periodic box {tuple(self.box_size)} m is shorter than twice the largest "
+                             f"cutoff {cut} m; the minimum image would miss pairs")
+        cell_start = self._bin(position, count)
+        self._is_large = _grow(self._is_large, count)
+        is_large = self._is_large
+        is_large[:count] = diameter[:count] > d_cell
+        large = np.flatnonzero(is_large[:count])
+        self._counts = _grow(self._counts, count)
+        self._extra = _grow(self._extra, count)
+        self._cursor = _grow(self._cursor, count)
+        counts, extra = self._counts, self._extra
+        if self.start.shape[0] != count + 1:
+            self.start = np.zeros(count + 1, dtype=np.int64)
+        start = self.start
+        no_index = np.zeros(0, dtype=np.int32)
+        args = (self.skin, self.period, self.inverse_period)
+        geometry = (self.shape, self.periodic, self._cell_xyz, cell_start, self._cell_droplets)
+        scan_small(position, diameter, count, is_large, *args, *geometry, self.half, start, no_index, counts)
+        extra[:count] = 0
+        if large.size:
+            scan_large(position, diameter, large, *args, self.cell_size, *geometry, is_large, self.half, no_index,
+                       self._cursor, extra)
+        start[0] = 0
+        np.cumsum(counts[:count] + extra[:count], out=start[1:])
+        total = int(start[count])
+        if total > self.index.shape[0]:
+            self.index = _grow(self.index, total)
+        scan_small(position, diameter, count, is_large, *args, *geometry, self.half, start, self.index, counts)
+        if large.size:
+            cursor = self._cursor
+            cursor[:count] = start[:count] + counts[:count]
+            extra[:count] = 0
+            scan_large(position, diameter, large, *args, self.cell_size, *geometry, is_large, self.half, self.index,
+                       cursor, extra)
+        self.count = count
+        self.builds += 1
+        self.reference_position = _grow(self.reference_position, count)
+        self.reference_diameter = _grow(self.reference_diameter, count)
+        self.reference_position[:count] = position[:count]
+        self.reference_diameter[:count] = diameter[:count]
+
+    def needs_rebuild(self, position, diameter, count) -> bool:
+        """True when the droplet count changed or some droplet travelled (or grew) more than skin/2 since the build."""
+        if count != self.count or self.builds == 0:
+            return True
+        travel = max_travel(position, self.reference_position, diameter, self.reference_diameter, count,
+                            self.period, self.inverse_period)
+        return travel > 0.5 * self.skin
+
+    def invalidate(self) -> None:
+        """Force a rebuild at the next check (call after adding, removing or reordering droplets)."""
+        self.builds = 0
+
+    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The list as two index arrays (i, j), one entry per stored row element (for tests and diagnostics)."""
+        rows = np.repeat(np.arange(self.count), np.diff(self.start))
+        return rows, self.index[: self.start[self.count]].astype(np.int64)
+
+
+def brute_force_pairs(position, diameter, count, skin, box_size, periodic):
+    """NumPy twin of the list: every pair i < j with distance < (d_i + d_j)/2 + skin, minimum image on periodic axes.
+
+    Returns (i, j) int64 arrays sorted lexicographically. O(n^2) memory: for tests on small sets.
+    """
+    pos = np.asarray(position[:count], dtype=float)
+    dia = np.asarray(diameter[:count], dtype=float)
+    period = np.where(np.asarray(periodic, dtype=bool), np.asarray(box_size, dtype=float), 0.0)
+    delta = pos[None, :, :] - pos[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.where(period > 0.0, period * np.rint(delta / np.where(period > 0.0, period, 1.0)), 0.0)
+    delta -= shift
+    dist2 = np.einsum("ijk,ijk->ij", delta, delta)
+    cut = 0.5 * (dia[:, None] + dia[None, :]) + skin
+    i, j = np.nonzero(np.triu(dist2 < cut * cut, k=1))
+    return i.astype(np.int64), j.astype(np.int64)
+
+
+def reorder_store(store, order) -> None:
+    """Permute the live droplets of a :class:`fulldem.droplets.DropletStore` so that new p is old ``order[p]``.
+
+    Every field moves with its droplet; coalescence partners are re-pointed to the new indices. Per-droplet arrays
+    held elsewhere must be permuted with the same ``order`` (``array[:n] = array[order]``).
+    """
+    from .droplets import FIELDS
+
+    n = store.count
+    order = np.asarray(order, dtype=np.int64)
+    if order.shape != (n,):
+        raise ValueError(f"neighbours: order has shape {order.shape}, expected ({n},)")
+    new_index = np.empty(n, dtype=np.int64)
+    new_index[order] = np.arange(n)
+    for name in FIELDS:
+        arr = getattr(store, name)
+        arr[:n] = arr[:n][order]
+    partner = store.partner[:n]
+    has = partner >= 0
+    partner[has] = new_index[partner[has]]
