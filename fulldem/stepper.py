@@ -107,6 +107,7 @@ class Simulation:
         self.time = 0.0
         self.steps = 0
         self.counters = Counters()
+        self.initial_mass = 0.0  # matte present at the start (droplet lists), counted as fed [kg]
         self.store = droplets if droplets is not None else DropletStore(4096)
 
         # boundaries

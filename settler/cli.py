@@ -84,10 +84,37 @@ def _reduced(args) -> int:
     return reduced_main(args)
 
 
+# ---------------------------------------------------------------------------------------------------------- full
+def _full_arguments(parser):
+    _add_case_arguments(parser)
+    parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    parser.add_argument("--end-time", type=float, metavar="SECONDS",
+                        help="simulated time to stop at [s] (default: the case's fulldem.end_time)")
+    parser.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz")
+    parser.add_argument("--droplets", metavar="CSV",
+                        help="initial droplets: CSV with columns x, y, z, diameter [, density] in SI units")
+    parser.add_argument("--no-feed", action="store_true", help="switch the droplet feed off")
+    parser.add_argument("--quiet", action="store_true", help="no progress line")
+
+
+def _full(args) -> int:
+    from fulldem.run import RunError, run_case
+
+    case = load_case(args.case, args.overrides)
+    try:
+        run_case(case, args.out, end_time=args.end_time, resume=args.resume, droplets=args.droplets,
+                 feed=False if args.no_feed else None, progress=not args.quiet)
+    except RunError as exc:
+        print(f"settler full: error: {exc}", file=sys.stderr)
+        return 3
+    return 0
+
+
 COMMANDS = {
     "info": (_info_arguments, _info, "print a resolved case and its derived numbers"),
     "cases": (_cases_arguments, _cases, "list the case presets, or print the case-file reference"),
     "reduced": (_reduced_arguments, _reduced, "run the reduced population-balance model (popbal) of a case"),
+    "full": (_full_arguments, _full, "run the coupled CFD-DEM engine (fulldem) on a case"),
 }
 
 

@@ -112,7 +112,7 @@ def test_missing_key_and_bad_property_set():
 
 
 def test_bad_files(tmp_path):
-    with pytest.raises(CaseError, match="neither a file nor a preset; presets: cubic, deep, furnace, simple"):
+    with pytest.raises(CaseError, match="neither a file nor a preset; presets: cubic, deep, demo, furnace, simple"):
         load_case("no_such_case")
     bad = tmp_path / "bad.toml"
     bad.write_text("[geometry\nheight = 1")
