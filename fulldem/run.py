@@ -7,6 +7,7 @@ Outputs in DIR (all written atomically):
   ``fulldem.output_interval`` of simulated time;
 * ``snapshots.pvd`` with ``droplets_NNNNN.vtu`` / ``fluid_NNNNN.vtu`` every ``fulldem.snapshot_interval`` (open the
   .pvd in ParaView);
+* ``timeseries.png`` and ``droplets.png`` (side and top views coloured by settling velocity) at the end;
 * ``checkpoint.npz`` every ``fulldem.checkpoint_interval`` seconds of wall time and at the end: ``--resume``
   continues from it and loses nothing;
 * on a numerical blow-up (non-finite values, runaway overlap) the run stops with a message and writes
@@ -219,8 +220,14 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     frame = time_series_frame(rows)
     write_time_series(frame, out / "timeseries.csv")
     save_checkpoint_now()
+    from .plots import plot_droplets, plot_time_series
+
+    n = sim.store.count
+    plot_time_series(out, f"{case.case.name}: fulldem")
+    plot_droplets(out / "droplets.png", sim.store.position[:n], sim.store.diameter[:n], sim.store.velocity[:n],
+                  sim.lower, sim.upper, f"{case.case.name} at t = {sim.time:.3g} s: {n} droplets")
     summary = {"end_time": sim.time, "steps": sim.steps, "droplets": sim.store.count, **vars(sim.counters)}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     log(f"done: t = {sim.time:.6g} s, {sim.store.count} droplets in the slag; outputs in {out} "
-        f"(timeseries.csv, snapshots.pvd for ParaView, checkpoint.npz)")
+        f"(timeseries.csv and timeseries.png, droplets.png, snapshots.pvd for ParaView, checkpoint.npz)")
     return frame

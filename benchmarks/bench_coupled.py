@@ -1,0 +1,109 @@
+"""Coupled CFD-DEM throughput: particle-steps per second, wall time per simulated second, memory.
+
+Not a test: prints figures. The set-up is the seed paper's simple model (0.2 m cube, 5 mm grid, 150 mm inlet)
+with N droplets of the feed distribution placed without overlap in the cylinder under the inlet (the channel
+region where the paper's droplets are), the feed switched off so N stays fixed, and the case's default fluid and
+DEM steps. Throughput = N x DEM sub-steps / wall time of the coupled loop (fluid step, coupling and DEM together;
+set-up, compilation and the first step excluded). Wall time per simulated second = loop time / simulated time:
+at N = 130 000 (the paper's steady count in the simple model) this is the steady-state cost of the simple case,
+since the feed adds about as many droplets as settle and the count holds.
+
+The machine is shared and noisy: compare ratios within one run, not absolute times across runs.
+
+    python benchmarks/bench_coupled.py                 # 10 000 and 130 000 droplets
+    python benchmarks/bench_coupled.py --n 20000 --steps 10 --case-override fulldem.contact_steps=20
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import resource
+import time
+
+import numpy as np
+
+from fulldem.droplets import DropletStore
+from fulldem.stepper import Simulation
+from settler.cases import load_case
+from settler.physics import sample_scale_factors
+
+
+def place_in_channel(n, case, rng):
+    """n non-overlapping droplets of the feed distribution, uniform in the cylinder under the inlet."""
+    g, f = case.geometry, case.feed
+    diameters = f.mean_diameter * sample_scale_factors(rng, n, f.scale_std, f.scale_min, f.scale_max)
+    cx, cy = case.inlet_center
+    radius = 0.5 * g.inlet_diameter - 1e-3
+    cell = 1.05 * diameters.max()
+    grid = {}
+    out = np.empty((n, 3))
+    placed = 0
+    while placed < n:
+        r = radius * np.sqrt(rng.uniform())
+        t = rng.uniform(0, 2 * np.pi)
+        p = np.array([cx + r * np.cos(t), cy + r * np.sin(t), rng.uniform(0.01, g.height - 0.005)])
+        key = tuple((p // cell).astype(int))
+        ok = True
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for dz in (-1, 0, 1):
+                    for q in grid.get((key[0] + dx, key[1] + dy, key[2] + dz), ()):
+                        if np.sum((out[q] - p) ** 2) < (0.5 * (diameters[q] + diameters[placed]) * 1.01) ** 2:
+                            ok = False
+        if ok:
+            out[placed] = p
+            grid.setdefault(key, []).append(placed)
+            placed += 1
+    return out, diameters
+
+
+def bench(n, steps, overrides):
+    case = load_case("simple", ["feed.mass_rate=0", "coalescence.enabled=false", *overrides])
+    rng = np.random.default_rng(1)
+    t0 = time.perf_counter()
+    pos, diam = place_in_channel(n, case, rng)
+    store = DropletStore(2 * n)
+    store.add(pos, diam, case.matte.density)
+    sim = Simulation(case, droplets=store, feed=False)
+    sim.step()  # compilation and first neighbour build
+    setup = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    for _ in range(steps):
+        sim.step()
+    loop = time.perf_counter() - t1
+    count = sim.store.count
+    dem_steps = steps * sim.substeps
+    return {
+        "n": n, "remaining": count, "substeps": sim.substeps, "dem_step": sim.h, "fluid_step": sim.dt,
+        "loop": loop, "setup": setup,
+        "throughput": count * dem_steps / loop,
+        "wall_per_sim_second": loop / (steps * sim.dt),
+        "ms_per_fluid_step": 1e3 * loop / steps,
+        "overlap": sim.last["max_overlap_ratio"],
+        "rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
+    }
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--n", type=int, nargs="*", default=[10_000, 130_000], help="droplet counts")
+    parser.add_argument("--steps", type=int, default=10, help="timed fluid steps per size")
+    parser.add_argument("--case-override", nargs="*", default=[], metavar="section.key=value",
+                        help="overrides of the simple case (e.g. fulldem.contact_steps=20)")
+    args = parser.parse_args()
+    print(f"coupled CFD-DEM benchmark on {platform.processor() or platform.machine()}, "
+          f"Python {platform.python_version()}; shared machine: compare ratios within this run")
+    print(f"{'droplets':>9} {'substeps':>8} {'DEM step':>9} {'ms/fluid step':>13} {'particle-steps/s':>17} "
+          f"{'wall s / sim s':>14} {'max overlap':>11} {'peak RSS':>9}")
+    for n in args.n:
+        r = bench(n, args.steps, args.case_override)
+        print(f"{r['remaining']:>9d} {r['substeps']:>8d} {r['dem_step']:>9.3g} {r['ms_per_fluid_step']:>13.1f} "
+              f"{r['throughput']:>17.3g} {r['wall_per_sim_second']:>14.1f} {r['overlap']:>11.3g} "
+              f"{r['rss_gib']:>7.2f} GiB", flush=True)
+    print("targets (issue): >= 2e7 particle-steps/s at 130 000 droplets; <= 100 s wall per simulated second of the "
+          "simple case at steady state; DEM step >= 5e-5 s")
+
+
+if __name__ == "__main__":
+    main()
