@@ -61,3 +61,13 @@ def test_info_table_feed_counts_every_class(capsys):
     f = case.feed
     expected = table_droplet_rate(f.mass_rate, f.table_diameters, f.table_mass_fractions, case.matte.density)
     assert _derived("furnace", capsys)["droplets fed per second"] == pytest.approx(expected, rel=1e-12)
+
+
+def test_readme_case_reference_is_current():
+    """The README's case-file reference is generated from the schema; regenerate with `settler cases --schema`."""
+    from pathlib import Path
+
+    from settler.cli import schema_markdown
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert schema_markdown() in readme
