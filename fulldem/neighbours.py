@@ -63,6 +63,18 @@ def _axis_range(cell, reach, ncell, periodic):
     return max(0, cell - reach), min(ncell - 1, cell + reach), False
 
 
+@njit(cache=True)
+def bounding_box(position, count):
+    """Lowest and highest coordinates (3,), (3,) [m] of the first ``count`` droplets (one pass)."""
+    low = np.full(3, np.inf)
+    high = np.full(3, -np.inf)
+    for p in range(count):
+        for a in range(3):
+            low[a] = min(low[a], position[p, a])
+            high[a] = max(high[a], position[p, a])
+    return low, high
+
+
 @njit(cache=True, parallel=True)
 def bin_droplets(position, count, grid_lower, cell_size, shape, periodic, cell_xyz, cell_id):
     """Cell coordinates (count, 3) int64 and linear cell index (count,) of each droplet (written in place).
@@ -111,12 +123,35 @@ def counting_sort(cell_id, count, cell_start, cell_droplets):
 
 
 @njit(cache=True, inline="always")
-def _pair_within(position, diameter, i, j, skin, period, inverse_period):
-    dx = _minimum_image(position[j, 0] - position[i, 0], period[0], inverse_period[0])
-    dy = _minimum_image(position[j, 1] - position[i, 1], period[1], inverse_period[1])
-    dz = _minimum_image(position[j, 2] - position[i, 2], period[2], inverse_period[2])
+def _pair_within(position, diameter, i, j, skin, periodic_any, period, inverse_period):
+    dx = position[j, 0] - position[i, 0]
+    dy = position[j, 1] - position[i, 1]
+    dz = position[j, 2] - position[i, 2]
+    if periodic_any:
+        dx = _minimum_image(dx, period[0], inverse_period[0])
+        dy = _minimum_image(dy, period[1], inverse_period[1])
+        dz = _minimum_image(dz, period[2], inverse_period[2])
     cut = 0.5 * (diameter[i] + diameter[j]) + skin
     return dx * dx + dy * dy + dz * dz < cut * cut
+
+
+@njit(cache=True, inline="always")
+def _scan_range(i, first, last, position, diameter, is_large, any_large, skin, periodic_any, period,
+                inverse_period, half, cell_droplets, fill, index, cursor):
+    """Partners of small droplet i among ``cell_droplets[first:last]``; returns (found, cursor)."""
+    found = 0
+    for k in range(first, last):
+        j = cell_droplets[k]
+        keep = (j != i) & ((not half) | (j > i))
+        if any_large:
+            keep = keep & (not is_large[j])
+        keep = keep & _pair_within(position, diameter, i, j, skin, periodic_any, period, inverse_period)
+        if fill:
+            if keep:
+                index[cursor] = j
+                cursor += 1
+        found += keep
+    return found, cursor
 
 
 @njit(cache=True, parallel=True)
@@ -125,15 +160,22 @@ def scan_small(position, diameter, count, is_large, skin, period, inverse_period
     """Pairs between droplets of at most the cell's diameter, from the 27 cells around each droplet.
 
     Count pass (``index`` of length 0): writes counts[i]. Fill pass: writes row i from ``start[i]`` on. A half list
-    keeps j > i; large droplets are skipped (their pairs are found by :func:`scan_large`).
+    keeps j > i; large droplets are skipped (their pairs are found by :func:`scan_large`). Along x the neighbour
+    cells of a row are consecutive in the sorted order (unless a periodic x wraps), so they are scanned as one range.
     """
     fill = index.shape[0] > 0
+    periodic_any = periodic[0] or periodic[1] or periodic[2]
+    any_large = False
+    for p in range(count):
+        if is_large[p]:
+            any_large = True
+            break
     for i in prange(count):
         if is_large[i]:
             counts[i] = 0
             continue
         found = 0
-        cursor = start[i]
+        cursor = start[i] if fill else 0
         zf, zl, zw = _axis_range(cell_xyz[i, 2], 1, shape[2], periodic[2])
         yf, yl, yw = _axis_range(cell_xyz[i, 1], 1, shape[1], periodic[1])
         xf, xl, xw = _axis_range(cell_xyz[i, 0], 1, shape[0], periodic[0])
@@ -142,18 +184,18 @@ def scan_small(position, diameter, count, is_large, skin, period, inverse_period
             for ty in range(yf, yl + 1):
                 cy = ty % shape[1] if yw else ty
                 row = shape[0] * (cy + shape[1] * cz)
-                for tx in range(xf, xl + 1):
-                    cx = tx % shape[0] if xw else tx
-                    cell = cx + row
-                    for k in range(cell_start[cell], cell_start[cell + 1]):
-                        j = cell_droplets[k]
-                        if j == i or (half and j < i) or is_large[j]:
-                            continue
-                        if _pair_within(position, diameter, i, j, skin, period, inverse_period):
-                            if fill:
-                                index[cursor] = j
-                                cursor += 1
-                            found += 1
+                if not xw:
+                    got, cursor = _scan_range(i, cell_start[row + xf], cell_start[row + xl + 1], position, diameter,
+                                              is_large, any_large, skin, periodic_any, period, inverse_period, half,
+                                              cell_droplets, fill, index, cursor)
+                    found += got
+                else:
+                    for tx in range(xf, xl + 1):
+                        cell = tx % shape[0] + row
+                        got, cursor = _scan_range(i, cell_start[cell], cell_start[cell + 1], position, diameter,
+                                                  is_large, any_large, skin, periodic_any, period, inverse_period,
+                                                  half, cell_droplets, fill, index, cursor)
+                        found += got
         counts[i] = found
 
 
@@ -187,7 +229,7 @@ def scan_large(position, diameter, large, skin, period, inverse_period, cell_siz
                             continue
                         if is_large[j] and (diameter[j] > diameter[i] or (diameter[j] == diameter[i] and j < i)):
                             continue  # j owns this pair
-                        if not _pair_within(position, diameter, i, j, skin, period, inverse_period):
+                        if not _pair_within(position, diameter, i, j, skin, True, period, inverse_period):
                             continue
                         if fill:
                             index[cursor[i]] = j
@@ -250,7 +292,7 @@ class NeighbourList:
     Attributes: ``start`` (n + 1,) int64 and ``index`` (capacity,) int32 (CSR rows; capacity doubles when a build
     needs more), ``half`` (bool), ``skin`` [m], ``count`` (droplets at the last build), ``builds`` (number of
     builds), ``reference_position`` (cap, 3) [m] and ``reference_diameter`` (cap,) [m] at the last build,
-    ``cell_size`` (3,) [m] and ``shape`` (3,) of the last binning.
+    ``cell_size`` (3,) [m] and ``shape`` (3,) of the last binning, ``longest_row`` (most partners of a droplet).
 
     Geometry: ``box_lower`` (3,) [m], ``box_size`` (3,) [m], ``periodic`` (3,) bool.
     """
@@ -269,6 +311,7 @@ class NeighbourList:
         self.start = np.zeros(1, dtype=np.int64)
         self.index = np.zeros(max(int(index_capacity), 1), dtype=np.int32)
         self.count = 0
+        self.longest_row = 0
         self.builds = 0
         self.reference_position = np.zeros((0, 3))
         self.reference_diameter = np.zeros(0)
@@ -291,9 +334,9 @@ class NeighbourList:
         else:
             d_cell = float(self.cell_diameter)
         side = d_cell + self.skin
-        pos = position[:count]
-        lo = np.where(self.periodic, self.box_lower, pos.min(axis=0) if count else self.box_lower)
-        extent = np.where(self.periodic, self.box_size, (np.ptp(pos, axis=0) if count else 0.0))
+        low, high = bounding_box(position, count)
+        lo = np.where(self.periodic, self.box_lower, low if count else self.box_lower)
+        extent = np.where(self.periodic, self.box_size, high - low if count else 0.0)
         budget = MAX_CELLS_PER_DROPLET * count + 1000
         while True:
             shape = np.where(self.periodic, np.maximum(1, np.floor(extent / side)), np.floor(extent / side) + 1)
@@ -365,6 +408,7 @@ class NeighbourList:
             scan_large(position, diameter, large, *args, self.cell_size, *geometry, is_large, self.half, self.index,
                        cursor, extra)
         self.count = count
+        self.longest_row = int(np.diff(start).max()) if count else 0
         self.builds += 1
         self.reference_position = _grow(self.reference_position, count)
         self.reference_diameter = _grow(self.reference_diameter, count)

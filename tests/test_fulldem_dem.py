@@ -155,6 +155,17 @@ def test_reorder_store_keeps_droplets_and_partners():
 
 
 # ------------------------------------------------------------------------------------------------ kernels vs twins
+NO_WALLS = (False, np.zeros(3), np.ones(3), -1, 0.0, 0.0, 0.0, 0.0)
+
+
+def _full_list_forces(store, mass, nl, k_ref, d_ref, zeta, force, walls=NO_WALLS, nchunk=4):
+    n = store.count
+    candidates = np.zeros((nchunk, max(nl.longest_row, 1)), dtype=np.int32)
+    return dem.contact_forces_full(store.position, store.velocity, store.diameter, mass, store.flags, store.partner,
+                                   n, nl.start, nl.index, k_ref, d_ref, zeta, 0, nl.period, nl.inverse_period,
+                                   *walls, nchunk, candidates, force)
+
+
 def _cluster(rng, n=50, periodic=(False, False, False)):
     """A cluster of droplets with many overlaps (a few per cent of d), random velocities, two coalescing couples."""
     box = np.array([2.2e-3, 2.2e-3, 2.6e-3])
@@ -187,12 +198,12 @@ def test_contact_kernels_match_numpy_twin(periodic, half):
     zeta = contacts.damping_ratio(0.4)
     force = np.full((n, 3), np.nan)
     law = contacts.contact_law_code("hooke")
-    args = (store.position, store.velocity, store.diameter, mass, store.flags, store.partner, n, nl.start, nl.index,
-            3.0, 0.5e-3, zeta, law, nl.period, nl.inverse_period, 4)
     if half:
-        worst = dem.contact_forces_half(*args, np.zeros((3, n, 3)), force)
+        worst = dem.contact_forces_half(store.position, store.velocity, store.diameter, mass, store.flags,
+                                        store.partner, n, nl.start, nl.index, 3.0, 0.5e-3, zeta, law, nl.period,
+                                        nl.inverse_period, 4, np.zeros((3, n, 3)), force)
     else:
-        worst = dem.contact_forces_full(*args, force)
+        worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, zeta, force)
     bi, bj = nb.brute_force_pairs(store.position, store.diameter, n, 0.0, box, periodic)
     ref, ref_worst = dem.contact_forces_reference(store.position, store.velocity, store.diameter, mass, store.flags,
                                                   store.partner, n, bi, bj, 3.0, 0.5e-3, zeta, law, nl.period)
@@ -215,9 +226,7 @@ def test_coalescing_couple_exerts_no_force():
     force = np.zeros((2, 3))
 
     def run():
-        return dem.contact_forces_full(store.position, store.velocity, store.diameter, mass, store.flags,
-                                       store.partner, 2, nl.start, nl.index, 5.0, 0.5e-3, 0.2, 0, nl.period,
-                                       nl.inverse_period, 1, force)
+        return _full_list_forces(store, mass, nl, 5.0, 0.5e-3, 0.2, force, nchunk=1)
 
     run()
     assert force[0, 0] == pytest.approx(-5.0 * 0.05e-3, rel=1e-12)
@@ -258,6 +267,26 @@ def test_wall_kernel_matches_numpy_twin(absorbing_bottom):
     assert np.all((ref[bottom, 2] == 0.0) == absorbing_bottom)
 
 
+def test_full_list_kernel_applies_the_same_walls():
+    rng = np.random.default_rng(8)
+    store, box, mass = _cluster(rng, n=60)
+    n = store.count
+    store.position[:n] -= 0.15e-3  # pressed into the lower walls, and into an outlet in the x- wall
+    periodic = np.array([False, False, False])
+    nl = nb.NeighbourList((0, 0, 0), box, periodic, 0.1e-3, half=False)
+    nl.build(store.position, store.diameter, n)
+    geometry = (np.zeros(3), box, periodic, False, 0, 0.6e-3, 0.7e-3, 0.5e-3)
+    fused = np.zeros((n, 3))
+    planes = dem.wall_planes(np.zeros(3), box, periodic, False)
+    worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, fused, walls=(True, *planes, *geometry[4:], 0.35))
+    apart = np.zeros((n, 3))
+    worst_pairs = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, apart)
+    worst_walls = dem.wall_forces(store.position, store.velocity, store.diameter, mass, n, *geometry, 3.0, 0.5e-3,
+                                  0.35, 0, 2, apart)
+    np.testing.assert_allclose(fused, apart, rtol=1e-13, atol=1e-14 * np.abs(apart).max())
+    assert worst == max(worst_pairs, worst_walls) and worst_walls > 0.0
+
+
 @pytest.mark.parametrize("uniform_fluid", [True, False])
 def test_integrator_kernels_match_numpy_twin(uniform_fluid):
     rng = np.random.default_rng(2)
@@ -286,6 +315,30 @@ def test_integrator_kernels_match_numpy_twin(uniform_fluid):
     np.testing.assert_allclose(v, v_ref, rtol=1e-12, atol=1e-18)
     np.testing.assert_allclose(impulse, j_ref, rtol=1e-9, atol=1e-12 * np.abs(mass[:, None] * vel).max())
     assert moved == pytest.approx(np.linalg.norm(x - pos, axis=1).max(), rel=1e-12)
+
+
+def test_advance_equals_repeated_steps_with_resorting():
+    runs = []
+    for fused in (False, True):
+        store, box, _ = _cluster(np.random.default_rng(12), n=50)
+        store.velocity[:50] *= 300.0  # fast enough to trigger rebuilds (and re-sorting) within the run
+        stepper = dem.DemStepper(store, (0, 0, 0), (0.004, 0.004, 0.004), (True, False, True), 2e-5, 5.0, 0.5e-3,
+                                 0.5, 0.05e-3, (0, 0, -3.75))
+        stepper.droplets_changed()
+        beta = 3 * math.pi * MU * store.diameter[:50]
+        stepper.set_drag(beta)
+        fluid = np.random.default_rng(0).normal(0, 1e-3, (50, 3))  # permuted with the droplets when they re-sort
+        impulse = np.zeros((50, 3))
+        if fused:
+            stepper.advance(40, fluid, impulse)
+        else:
+            for _ in range(40):
+                stepper.step(fluid, impulse)
+        assert stepper.neighbours.builds > 1
+        runs.append((store.ident[:50].copy(), store.position[:50].copy(), store.velocity[:50].copy(), impulse))
+    order = np.argsort(runs[0][0]), np.argsort(runs[1][0])
+    for a in range(1, 4):
+        np.testing.assert_allclose(runs[1][a][order[1]], runs[0][a][order[0]], rtol=1e-12, atol=1e-20)
 
 
 def test_drag_factors_series_and_exponential_branches_agree():
