@@ -46,6 +46,9 @@ HASIMOTO = 2.837297
 SELF_CORRECTION_CAP = 0.9
 #: Largest stencil extent in nodes per axis that the work arrays are sized for.
 MAX_STENCIL = 64
+#: Chunks of droplets of the parallel interpolation (each allocates its stencil buffers once): a few per thread for
+#: load balance on a shared machine. A constant, not numba.get_num_threads(), which would stop the kernels caching.
+CHUNKS = 64
 
 
 @njit(cache=True)
@@ -81,106 +84,203 @@ def weights_1d(x, lower, spacing, n_cells, staggered, wall_normal, periodic, sig
     count = 0
     total = 0.0
     inv = 1.0 / (2.0 * (sigma / spacing) ** 2)
+    # exp(-r^2 inv) at consecutive nodes r, r + 1, ... by the recurrence w <- w g, g <- g q (g = exp(-(2r + 1) inv),
+    # q = exp(-2 inv)): three exps per axis instead of one per node. g grows like exp(2 reach inv) = exp(cut h/sigma)
+    # at most, far from overflow for any kernel wider than a hundredth of a cell; narrower ones take exps per node.
+    r = first - s
+    recurrence = cut * spacing < 100.0 * sigma
+    w = math.exp(-r * r * inv)
+    g = math.exp(-(2.0 * r + 1.0) * inv) if recurrence else 0.0
+    q = math.exp(-2.0 * inv) if recurrence else 0.0
     for node in range(first, last + 1):
-        if node < low or node > high:
-            continue
-        r = node - s
-        w = math.exp(-r * r * inv)
-        index_out[count] = node % n_nodes if periodic else node
-        weight_out[count] = w
-        total += w
-        count += 1
+        if not recurrence:
+            r = node - s
+            w = math.exp(-r * r * inv)
+        if low <= node <= high:
+            index_out[count] = node % n_nodes if periodic else node
+            weight_out[count] = w
+            total += w
+            count += 1
+        if recurrence:
+            w *= g
+            g *= q
     if count == 0:  # pathological: a droplet outside the box; use the nearest valid node
         node = min(max(int(round(s)), low), high) if not periodic else int(round(s)) % n_nodes
         index_out[0] = node
         weight_out[0] = 1.0
         return 1
+    scale = 1.0 / total
     for c in range(count):
-        weight_out[c] /= total
+        weight_out[c] *= scale
     return count
 
 
 @njit(cache=True)
-def _stencil(position, sigma, spacing, lower, shape, periodic, component, cut, idx, wts, counts):
-    """Weights along the three axes for the array of `component` (0..2 face arrays, 3 cells)."""
+def stencils(position, sigma, spacing, lower, shape, periodic, cut, idx, wts, counts):
+    """Both 1-D weight sets of one droplet along each axis: ``[0, axis]`` at cell centres (cells, and the faces of
+    the two other components), ``[1, axis]`` at the faces normal to that axis (the faces of component ``axis``).
+
+    idx (2, 3, MAX_STENCIL) int64, wts (2, 3, MAX_STENCIL), counts (2, 3) int64: written. The weights of component
+    c (0..2 faces, 3 cells) along axis a are set ``1 if c == a else 0``.
+    """
     for axis in range(3):
-        staggered = component == axis
-        wall_normal = staggered and not periodic[axis]
-        counts[axis] = weights_1d(position[axis], lower[axis], spacing, shape[axis], staggered, wall_normal,
-                                  periodic[axis], sigma, cut, idx[axis], wts[axis])
+        counts[0, axis] = weights_1d(position[axis], lower[axis], spacing, shape[axis], False, False,
+                                     periodic[axis], sigma, cut, idx[0, axis], wts[0, axis])
+        counts[1, axis] = weights_1d(position[axis], lower[axis], spacing, shape[axis], True, not periodic[axis],
+                                     periodic[axis], sigma, cut, idx[1, axis], wts[1, axis])
 
 
 @njit(cache=True, parallel=True)
-def deposit(position, diameter, value, count, component, out, spacing, lower, shape, periodic, sigma_cells,
-            sigma_diameter, cut, scratch):
-    """Add sum_p value[p] * w_p(node) to ``out`` (cells if component == 3, else faces of that component).
+def deposit_many(position, diameter, values, count, components, out, spacing, lower, shape, periodic, sigma_cells,
+                 sigma_diameter, cut, scratch):
+    """Add sum_p values[k, p] * w_p(node) to ``out[k]`` for k = 0..m-1, one stencil computation per droplet.
 
-    value: (cap,) per-droplet amount (e.g. volume / cell volume). scratch: (n_threads, *out.shape) work array,
-    zeroed here, that makes the parallel sum race-free.
+    values: (m, cap) per-droplet amounts (e.g. volume / cell volume); components: (m,) int64, the array of each
+    quantity (0..2 faces of that component, 3 cells); out: tuple of m arrays of those shapes, added to.
+    scratch: (n_chunks, m, NX, NY, NZ) work array with NX, NY, NZ >= every out[k]'s shape (NX = nx + 1 etc. fits
+    all four), one slab per chunk of droplets so the parallel sum is race-free; its chunks are zeroed here.
+    The weights are those of :func:`interpolate_many` (adjointness), normalised (conservation).
     """
     n_chunks = scratch.shape[0]
-    scratch[:] = 0.0
+    m = components.shape[0]
     for chunk in prange(n_chunks):
-        idx = np.empty((3, MAX_STENCIL), dtype=np.int64)
-        wts = np.empty((3, MAX_STENCIL))
-        counts = np.empty(3, dtype=np.int64)
+        # stencil buffers once per chunk of droplets, not per droplet
+        idx = np.empty((2, 3, MAX_STENCIL), dtype=np.int64)
+        wts = np.empty((2, 3, MAX_STENCIL))
+        counts = np.empty((2, 3), dtype=np.int64)
         buf = scratch[chunk]
+        for k in range(m):
+            o = out[k]
+            for i in range(o.shape[0]):
+                for j in range(o.shape[1]):
+                    for l in range(o.shape[2]):
+                        buf[k, i, j, l] = 0.0
         start = chunk * count // n_chunks
         stop = (chunk + 1) * count // n_chunks
         for p in range(start, stop):
             sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
-            _stencil(position[p], sigma, spacing, lower, shape, periodic, component, cut, idx, wts, counts)
-            v = value[p]
-            for a in range(counts[0]):
-                ia = idx[0, a]
-                wa = wts[0, a] * v
-                for b in range(counts[1]):
-                    ib = idx[1, b]
-                    wab = wa * wts[1, b]
-                    for c in range(counts[2]):
-                        buf[ia, ib, idx[2, c]] += wab * wts[2, c]
-    for chunk in range(n_chunks):
-        out += scratch[chunk]
+            stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+            for k in range(m):
+                v = values[k, p]
+                if v == 0.0:
+                    continue
+                c = components[k]
+                sx = 1 if c == 0 else 0
+                sy = 1 if c == 1 else 0
+                sz = 1 if c == 2 else 0
+                nz = counts[sz, 2]
+                for a in range(counts[sx, 0]):
+                    ia = idx[sx, 0, a]
+                    wa = wts[sx, 0, a] * v
+                    for b in range(counts[sy, 1]):
+                        ib = idx[sy, 1, b]
+                        wab = wa * wts[sy, 1, b]
+                        row = buf[k, ia, ib]
+                        for cc in range(nz):
+                            row[idx[sz, 2, cc]] += wab * wts[sz, 2, cc]
+    for k in range(m):
+        o = out[k]
+        nj, nl = o.shape[1], o.shape[2]
+        for i in prange(o.shape[0]):
+            for j in range(nj):
+                for l in range(nl):
+                    acc = 0.0
+                    for chunk in range(n_chunks):
+                        acc += scratch[chunk, k, i, j, l]
+                    o[i, j, l] += acc
 
 
 @njit(cache=True, parallel=True)
+def interpolate_many(position, diameter, count, components, fields, out, own, spacing, lower, shape, periodic,
+                     sigma_cells, sigma_diameter, cut):
+    """out[k, p] = sum_nodes w_p(node) fields[k][node] for k = 0..m-1, one stencil computation per droplet.
+
+    components: (m,) int64 (0..2 faces, 3 cells); fields: tuple of m arrays of those shapes; out: (m, cap).
+    own: (cap,) or (0,): if not empty, also own[p] = sum_cells w_p(cell)^2 (see :func:`self_weight`).
+    """
+    m = components.shape[0]
+    n_chunks = min(count, CHUNKS)
+    with_own = own.shape[0] > 0
+    for chunk in prange(n_chunks):
+        idx = np.empty((2, 3, MAX_STENCIL), dtype=np.int64)
+        wts = np.empty((2, 3, MAX_STENCIL))
+        counts = np.empty((2, 3), dtype=np.int64)
+        start = chunk * count // n_chunks
+        stop = (chunk + 1) * count // n_chunks
+        for p in range(start, stop):
+            sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
+            stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+            for k in range(m):
+                field = fields[k]
+                c = components[k]
+                sx = 1 if c == 0 else 0
+                sy = 1 if c == 1 else 0
+                sz = 1 if c == 2 else 0
+                nz = counts[sz, 2]
+                acc = 0.0
+                for a in range(counts[sx, 0]):
+                    ia = idx[sx, 0, a]
+                    for b in range(counts[sy, 1]):
+                        ib = idx[sy, 1, b]
+                        wab = wts[sx, 0, a] * wts[sy, 1, b]
+                        row = field[ia, ib]
+                        for cc in range(nz):
+                            acc += wab * wts[sz, 2, cc] * row[idx[sz, 2, cc]]
+                out[k, p] = acc
+            if with_own:
+                own[p] = _sum_of_squares(wts, counts, 3)
+
+
+@njit(cache=True)
+def _sum_of_squares(wts, counts, component):
+    acc = 1.0
+    for axis in range(3):
+        st = 1 if component == axis else 0
+        s2 = 0.0
+        for a in range(counts[st, axis]):
+            s2 += wts[st, axis, a] * wts[st, axis, a]
+        acc *= s2
+    return acc
+
+
+def deposit(position, diameter, value, count, component, out, spacing, lower, shape, periodic, sigma_cells,
+            sigma_diameter, cut, scratch):
+    """Add sum_p value[p] * w_p(node) to ``out`` (cells if component == 3, else faces of that component).
+
+    value: (cap,) per-droplet amount (e.g. volume / cell volume). scratch: (n_chunks, *out.shape) work array (one
+    slab per chunk of droplets, which makes the parallel sum race-free). One quantity of :func:`deposit_many`.
+    """
+    deposit_many(position, diameter, np.asarray(value, dtype=float).reshape(1, -1), count,
+                 np.array([component], dtype=np.int64), (out,), spacing, lower, shape, periodic, sigma_cells,
+                 sigma_diameter, cut, scratch.reshape(scratch.shape[0], 1, *scratch.shape[1:]))
+
+
 def interpolate(position, diameter, count, component, field, out, spacing, lower, shape, periodic, sigma_cells,
                 sigma_diameter, cut):
     """out[p] = sum_nodes w_p(node) field[node] for the array of ``component`` (0..2 faces, 3 cells)."""
-    for p in prange(count):
-        idx = np.empty((3, MAX_STENCIL), dtype=np.int64)
-        wts = np.empty((3, MAX_STENCIL))
-        counts = np.empty(3, dtype=np.int64)
-        sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
-        _stencil(position[p], sigma, spacing, lower, shape, periodic, component, cut, idx, wts, counts)
-        acc = 0.0
-        for a in range(counts[0]):
-            ia = idx[0, a]
-            for b in range(counts[1]):
-                ib = idx[1, b]
-                wab = wts[0, a] * wts[1, b]
-                for c in range(counts[2]):
-                    acc += wab * wts[2, c] * field[ia, ib, idx[2, c]]
-        out[p] = acc
+    values = np.empty((1, max(count, 1)))
+    interpolate_many(position, diameter, count, np.array([component], dtype=np.int64), (field,), values, NO_OWN,
+                     spacing, lower, shape, periodic, sigma_cells, sigma_diameter, cut)
+    out[:count] = values[0, :count]
 
 
 @njit(cache=True, parallel=True)
 def self_weight(position, diameter, count, component, out, spacing, lower, shape, periodic, sigma_cells,
                 sigma_diameter, cut):
     """out[p] = sum_nodes w_p(node)^2: a droplet's own deposit seen back at itself (to remove self-volume)."""
-    for p in prange(count):
-        idx = np.empty((3, MAX_STENCIL), dtype=np.int64)
-        wts = np.empty((3, MAX_STENCIL))
-        counts = np.empty(3, dtype=np.int64)
-        sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
-        _stencil(position[p], sigma, spacing, lower, shape, periodic, component, cut, idx, wts, counts)
-        acc = 1.0
-        for axis in range(3):
-            s2 = 0.0
-            for a in range(counts[axis]):
-                s2 += wts[axis, a] * wts[axis, a]
-            acc *= s2
-        out[p] = acc
+    n_chunks = min(count, CHUNKS)
+    for chunk in prange(n_chunks):
+        idx = np.empty((2, 3, MAX_STENCIL), dtype=np.int64)
+        wts = np.empty((2, 3, MAX_STENCIL))
+        counts = np.empty((2, 3), dtype=np.int64)
+        for p in range(chunk * count // n_chunks, (chunk + 1) * count // n_chunks):
+            sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
+            stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+            out[p] = _sum_of_squares(wts, counts, component)
+
+
+#: Empty ``own`` argument of :func:`interpolate_many`: no self weights wanted.
+NO_OWN = np.zeros(0)
 
 
 @njit(cache=True)

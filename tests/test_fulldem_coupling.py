@@ -129,3 +129,46 @@ def test_oseen_factor_limits():
     big = cp.oseen_factor(np.array([1e3, 2e3]))
     assert big[0] / big[1] == pytest.approx(2.0, rel=0.05)
     assert np.all(np.diff(cp.oseen_factor(np.logspace(-2, 3, 20))) < 0)
+
+
+@pytest.mark.parametrize("periodic", [(False, False, False), (True, False, True)])
+def test_fused_passes_match_single_quantity_kernels(periodic):
+    """deposit_many / interpolate_many (one stencil per droplet for several quantities) give exactly what the
+    single-quantity kernels give, and the self weight of the cells comes out of the same pass."""
+    grid = Grid((12, 10, 14), 0.004, (0.1, -0.02, 0.0), periodic)
+    rng = np.random.default_rng(11)
+    n = 70
+    pos, diam = _droplets(rng, n, grid)
+    components = np.array([0, 1, 2, 3, 0, 2], dtype=np.int64)
+    values = rng.uniform(-1.0, 2.0, size=(len(components), n))
+    outs = [_field(grid, c) for c in components]
+    nx, ny, nz = grid.shape
+    scratch = np.zeros((cp.thread_count(), len(components), nx + 1, ny + 1, nz + 1))
+    cp.deposit_many(pos, diam, values, n, components, tuple(outs), *_args(grid), 1.0, 0.5, CUT, scratch)
+    fields = [rng.normal(size=o.shape) for o in outs]
+    seen = np.zeros((len(components), n))
+    own = np.zeros(n)
+    cp.interpolate_many(pos, diam, n, components, tuple(fields), seen, own, *_args(grid), 1.0, 0.5, CUT)
+    for k, c in enumerate(components):
+        single = _field(grid, c)
+        cp.deposit(pos, diam, values[k], n, c, single, *_args(grid), 1.0, 0.5, CUT,
+                   np.zeros((cp.thread_count(), *single.shape)))
+        np.testing.assert_array_equal(outs[k], single)
+        interp = np.zeros(n)
+        cp.interpolate(pos, diam, n, c, fields[k], interp, *_args(grid), 1.0, 0.5, CUT)
+        np.testing.assert_array_equal(seen[k], interp)
+    sw = np.zeros(n)
+    cp.self_weight(pos, diam, n, 3, sw, *_args(grid), 1.0, 0.5, CUT)
+    np.testing.assert_array_equal(own, sw)
+
+
+def test_weights_match_direct_gaussian():
+    """The recurrence that evaluates the Gaussian at consecutive nodes agrees with one exp per node to round-off."""
+    idx = np.zeros(cp.MAX_STENCIL, dtype=np.int64)
+    wts = np.zeros(cp.MAX_STENCIL)
+    for sigma, x in [(0.004, 0.0513), (0.011, 0.0377), (0.0021, 0.0099), (0.05, 0.1)]:
+        count = cp.weights_1d(x, 0.0, 0.004, 40, True, True, False, sigma, CUT, idx, wts)
+        r = idx[:count] - x / 0.004
+        direct = np.exp(-r**2 / (2 * (sigma / 0.004) ** 2))
+        np.testing.assert_allclose(wts[:count], direct / direct.sum(), rtol=1e-13)
+        assert wts[:count].sum() == pytest.approx(1.0, rel=1e-15)
