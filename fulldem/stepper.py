@@ -42,20 +42,36 @@ from .neighbours import reorder_store
 MOBILITY_RATIOS = np.array([0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0])
 
 
-class CoupledDem(DemStepper):
-    """DEM stepper whose force also includes a per-droplet ``external`` force (cap, 3) [N] while it is set.
+#: Quantities deposited at x^n before the fluid step, by array: volume on the three face arrays and the cells, then
+#: the volume flux on the faces (one stencil computation per droplet for all seven).
+DEPOSIT_COMPONENTS = np.array([0, 1, 2, 3, 0, 1, 2], dtype=np.int64)
+#: Fields interpolated at x^n after the fluid step: fluid velocity and pressure force on the faces, volume fraction
+#: at the cells.
+INTERPOLATE_COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 3], dtype=np.int64)
+#: Droplets are re-sorted by neighbour cell (memory locality of the DEM and coupling passes) every this many fluid
+#: steps; they move a small fraction of a cell per step, and a sort also rebuilds the neighbour list.
+SORT_INTERVAL = 50
 
-    The coupling sets it (buoyant weight and pressure force, which differ per droplet) for the sub-steps of one
-    fluid step; droplets are not re-sorted during those sub-steps, so the array stays aligned with the store.
+
+class CoupledDem(DemStepper):
+    """DEM stepper that also records ``worst_overlap``, the largest overlap ratio over every step of an
+    :meth:`advance` (the base class keeps the last step's); the caller zeroes it before the sub-steps.
+
+    The coupling's per-droplet external force F (buoyant weight and pressure force, held over a fluid step) enters
+    through the fluid velocity: dv/dt = (F + contacts)/m + (u - v)/tau is the same as contacts/m + (u + F/beta - v)/tau,
+    so the DEM sees u + F/beta, and its drag impulse then includes F h per step, which the coupling subtracts. This
+    keeps the contact-force computation free of extra terms, so whole sub-steps run as one fused pass.
     """
 
-    external = None
+    worst_overlap = 0.0
 
-    def compute_forces(self) -> float:
-        worst = super().compute_forces()
-        if self.external is not None:
-            n = self.store.count
-            self.force[:n] += self.external[:n]
+    def _step_fused(self, fluid_velocity, impulse, nchunk):
+        super()._step_fused(fluid_velocity, impulse, nchunk)
+        self.worst_overlap = max(self.worst_overlap, self.max_overlap_ratio)
+
+    def compute_forces_tracked(self) -> float:
+        worst = self.compute_forces()
+        self.worst_overlap = max(self.worst_overlap, worst)
         return worst
 
 
@@ -171,6 +187,11 @@ class Simulation:
     def _alloc(self, capacity):
         self.beta = np.zeros(capacity)
         self.fluid_velocity = np.zeros((capacity, 3))
+        self.drift_velocity = np.zeros((capacity, 3))  # u + F/beta, what the DEM sees (see CoupledDem)
+        self.deposited = np.zeros((len(DEPOSIT_COMPONENTS), capacity))
+        self.interpolated = np.zeros((len(INTERPOLATE_COMPONENTS), capacity))
+        self.own = np.zeros(capacity)
+        self.eps_around = np.ones(capacity)
         self.impulse = np.zeros((capacity, 3))
         self.external = np.zeros((capacity, 3))
         self.start_position = np.zeros((capacity, 3))
@@ -191,6 +212,18 @@ class Simulation:
         cp.deposit(positions, self.store.diameter, values, self.store.count, component, out, *self._grid_args(),
                    *self.kernel, scratch)
         return out
+
+    def deposit_many(self, positions, values, components, outs):
+        """Deposit rows of ``values`` (m, cap) on the arrays ``outs`` (m arrays, of ``components``), one pass."""
+        m = len(components)
+        nx, ny, nz = self.grid.shape
+        size = cp.thread_count() * m * (nx + 1) * (ny + 1) * (nz + 1)
+        if getattr(self, "_scratch", np.zeros(0)).size < size:
+            self._scratch = np.zeros(size)  # work array for every deposit; its chunks are zeroed by the kernel
+        scratch = self._scratch[:size].reshape(cp.thread_count(), m, nx + 1, ny + 1, nz + 1)
+        cp.deposit_many(positions, self.store.diameter, values, self.store.count, components, tuple(outs),
+                        *self._grid_args(), *self.kernel, scratch)
+        return outs
 
     def interpolate(self, positions, field, component, out):
         cp.interpolate(positions, self.store.diameter, self.store.count, component, field, out, *self._grid_args(),
@@ -280,14 +313,24 @@ class Simulation:
             self.insert(self.schedule.advance(self.time + self.dt))
         s = self.store
         self._ensure_capacity()
-        if s.count:
+        if s.count and self.steps % SORT_INTERVAL == 0:
             reorder_store(s, self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
             self.dem.droplets_changed()
         n = s.count
-        eps_faces, eps_cells = self.void_fraction()
+        self.start_position[:n] = s.position[:n]
+
+        # volume and volume flux at x^n, one pass: eps on faces and cells, q on faces
+        volume = math.pi / 6.0 * s.diameter[:n] ** 3
+        values = self.deposited
+        values[:4, :n] = volume / self.grid.cell_volume
+        values[4:, :n] = values[0, :n] * s.velocity[:n].T
+        faces = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
+        phi_cells = self.grid.zeros_cells()
+        flux = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
+        self.deposit_many(s.position, values, DEPOSIT_COMPONENTS, faces + [phi_cells] + flux)
+        eps_faces = [np.subtract(1.0, f, out=f) for f in faces]
         if min(float(e.min()) for e in eps_faces) <= 0.0:
             raise FloatingPointError("void fraction reached zero on a face: droplets overfill a cell")
-        flux = self.particle_flux()
         state, fdiag = fl.step(self.grid, self.fluid, self.boundary, self.density, self.viscosity, self.dt,
                                eps_faces=eps_faces, particle_flux=flux, force=self.owed_force,
                                body_force=self.body_force, eps_faces_old=self.eps_old,
@@ -296,47 +339,39 @@ class Simulation:
         self.eps_old = eps_faces
         self.momentum_eps = eps_faces
 
-        # what the droplets feel, interpolated at x^n with the deposition weights
-        self.start_position[:n] = s.position[:n]
+        # what the droplets feel, interpolated at x^n with the deposition weights, one pass
         pressure_force = fl.pressure_force_density(self.grid, state.p, self.body_force)
-        volume = math.pi / 6.0 * s.diameter[:n] ** 3
         droplet_masses(s.diameter, s.density, n, self.mass)
-        for a in range(3):
-            self.interpolate(s.position, (state.u, state.v, state.w)[a], a, self.per_droplet)
-            self.fluid_velocity[:n, a] = self.per_droplet[:n]
-            self.interpolate(s.position, pressure_force[a], a, self.per_droplet)
-            self.external[:n, a] = volume * self.per_droplet[:n] + (self.mass[:n] - self.density * volume) \
-                * self.gravity[a]
-        phi = self.interpolate(s.position, 1.0 - eps_cells, 3, self.per_droplet)[:n].copy()
-        own = np.zeros(s.capacity)
-        cp.self_weight(s.position, s.diameter, n, 3, own, *self._grid_args(), *self.kernel)
-        eps_around = np.clip(1.0 - (phi - own[:n] * volume / self.grid.cell_volume), 0.0, 1.0)
-        eps_buf = np.ones(s.capacity)
-        eps_buf[:n] = eps_around
-        drag_coefficients(s.diameter, s.velocity, self.fluid_velocity, eps_buf, n, self.density, self.viscosity,
+        seen = self.interpolated
+        cp.interpolate_many(s.position, s.diameter, n, INTERPOLATE_COMPONENTS,
+                            (state.u, state.v, state.w, *pressure_force, phi_cells), seen, self.own,
+                            *self._grid_args(), *self.kernel)
+        self.fluid_velocity[:n] = seen[:3, :n].T
+        self.external[:n] = volume[:, None] * seen[3:6, :n].T \
+            + (self.mass[:n] - self.density * volume)[:, None] * self.gravity
+        eps_around = self.eps_around
+        eps_around[:n] = 1.0 - (seen[6, :n] - self.own[:n] * volume / self.grid.cell_volume)
+        np.clip(eps_around[:n], 0.0, 1.0, out=eps_around[:n])
+        drag_coefficients(s.diameter, s.velocity, self.fluid_velocity, eps_around, n, self.density, self.viscosity,
                           self.drag_law, fd.hindrance == "di_felice", self.viscosity_ratio, self.grid.spacing,
                           fd.sigma_cells, fd.sigma_diameter, fd.self_correction, MOBILITY_RATIOS, self.mobility,
                           self.oseen_logs, self.oseen_values, self.beta)
 
-        # DEM sub-steps with the external force held over the fluid step
+        # DEM sub-steps with the external force held over the fluid step, folded into the fluid velocity (see
+        # CoupledDem): the DEM's impulse is then drag + F h per sub-step
         self.impulse[:n] = 0.0
+        self.drift_velocity[:n] = self.fluid_velocity[:n] + self.external[:n] / self.beta[:n, None]
         self.dem.set_drag(self.beta)
-        self.dem.external = self.external
-        self.dem.compute_forces()
-        worst = 0.0
-        try:
-            for _ in range(self.substeps):
-                self.dem.step(self.fluid_velocity, self.impulse)
-                worst = max(worst, self.dem.max_overlap_ratio)
-        finally:
-            self.dem.external = None
+        self.dem.worst_overlap = 0.0
+        self.dem.compute_forces_tracked()
+        self.dem.advance(self.substeps, self.drift_velocity, self.impulse)
+        worst = max(self.dem.worst_overlap, self.dem.max_overlap_ratio)
+        self.impulse[:n] -= self.external[:n] * (self.substeps * self.h)
 
         # the fluid is owed -J, deposited where the droplets felt the fluid
-        self.owed_force = []
-        for a in range(3):
-            self.per_droplet[:n] = -self.impulse[:n, a] / (self.dt * self.grid.cell_volume)
-            self.owed_force.append(self.deposit(self.start_position, self.per_droplet, a,
-                                                np.zeros(self.grid.face_shape(a))))
+        values[:3, :n] = -self.impulse[:n].T / (self.dt * self.grid.cell_volume)
+        self.owed_force = self.deposit_many(self.start_position, values[:3], INTERPOLATE_COMPONENTS[:3],
+                                            [np.zeros(self.grid.face_shape(a)) for a in range(3)])
         self.time += self.dt
         self.steps += 1
         self.remove_exits()
