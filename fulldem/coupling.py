@@ -130,16 +130,78 @@ def stencils(position, sigma, spacing, lower, shape, periodic, cut, idx, wts, co
                                      periodic[axis], sigma, cut, idx[1, axis], wts[1, axis])
 
 
+#: Stencil-table modes of :func:`deposit_many` / :func:`interpolate_many`: compute the weights (no table), compute
+#: and store them in the table, or load them from it. A fluid step's three passes are all at x^n: the first stores,
+#: the other two load (the weights are the same numbers, so adjointness stays exact).
+COMPUTE, STORE, LOAD = 0, 1, 2
+#: Nodes per axis kept in a stencil table: 6 covers sigma <= 1.2 h with cut 2.5 (every droplet of up to 2.4 cells
+#: at sigma_cells = 1); a wider droplet's row is marked not stored and recomputed.
+TABLE_WIDTH = 6
+
+
+def stencil_table(capacity, width=TABLE_WIDTH):
+    """Empty stencil table (first node (cap, 2, 3) int64, node count (cap, 2, 3) int64, weights (cap, 2, 3, width))
+    for the STORE / LOAD modes; rows as in :func:`stencils`."""
+    return (np.zeros((capacity, 2, 3), dtype=np.int64), np.zeros((capacity, 2, 3), dtype=np.int64),
+            np.zeros((capacity, 2, 3, width)))
+
+
+#: No stencil table (COMPUTE mode).
+NO_TABLE = stencil_table(0, 1)
+
+
+@njit(cache=True)
+def droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sigma_cells, sigma_diameter, cut, idx,
+                     wts, counts, table_first, table_count, table_weights, mode):
+    """:func:`stencils` of droplet p, computed, computed and stored in row p of the table, or loaded from it.
+
+    The nodes of one set are consecutive (modulo the axis length on periodic axes), so a row keeps the first node.
+    """
+    if mode == LOAD and table_count[p, 0, 0] > 0:
+        for st in range(2):
+            for axis in range(3):
+                k = table_count[p, st, axis]
+                counts[st, axis] = k
+                n_nodes = shape[axis]
+                first = table_first[p, st, axis]
+                for i in range(k):
+                    node = first + i
+                    if periodic[axis] and node >= n_nodes:
+                        node -= n_nodes
+                    idx[st, axis, i] = node
+                    wts[st, axis, i] = table_weights[p, st, axis, i]
+        return
+    sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
+    stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+    if mode == STORE:
+        width = table_weights.shape[3]
+        fits = True
+        for st in range(2):
+            for axis in range(3):
+                fits = fits and counts[st, axis] <= width
+        if not fits:
+            table_count[p, 0, 0] = 0  # recomputed when loaded
+            return
+        for st in range(2):
+            for axis in range(3):
+                table_count[p, st, axis] = counts[st, axis]
+                table_first[p, st, axis] = idx[st, axis, 0]
+                for i in range(counts[st, axis]):
+                    table_weights[p, st, axis, i] = wts[st, axis, i]
+
+
 @njit(cache=True, parallel=True)
 def deposit_many(position, diameter, values, count, components, out, spacing, lower, shape, periodic, sigma_cells,
-                 sigma_diameter, cut, scratch):
+                 sigma_diameter, cut, scratch, table_first, table_count, table_weights,
+                 mode):
     """Add sum_p values[k, p] * w_p(node) to ``out[k]`` for k = 0..m-1, one stencil computation per droplet.
 
     values: (m, cap) per-droplet amounts (e.g. volume / cell volume); components: (m,) int64, the array of each
     quantity (0..2 faces of that component, 3 cells); out: tuple of m arrays of those shapes, added to.
     scratch: (n_chunks, m, NX, NY, NZ) work array with NX, NY, NZ >= every out[k]'s shape (NX = nx + 1 etc. fits
     all four), one slab per chunk of droplets so the parallel sum is race-free; its chunks are zeroed here.
-    The weights are those of :func:`interpolate_many` (adjointness), normalised (conservation).
+    The weights are those of :func:`interpolate_many` (adjointness), normalised (conservation). table_*, mode:
+    see :func:`droplet_stencils` (:data:`NO_TABLE`, COMPUTE: none).
     """
     n_chunks = scratch.shape[0]
     m = components.shape[0]
@@ -158,8 +220,8 @@ def deposit_many(position, diameter, values, count, components, out, spacing, lo
         start = chunk * count // n_chunks
         stop = (chunk + 1) * count // n_chunks
         for p in range(start, stop):
-            sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
-            stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+            droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sigma_cells, sigma_diameter,
+                             cut, idx, wts, counts, table_first, table_count, table_weights, mode)
             for k in range(m):
                 v = values[k, p]
                 if v == 0.0:
@@ -192,11 +254,12 @@ def deposit_many(position, diameter, values, count, components, out, spacing, lo
 
 @njit(cache=True, parallel=True)
 def interpolate_many(position, diameter, count, components, fields, out, own, spacing, lower, shape, periodic,
-                     sigma_cells, sigma_diameter, cut):
+                     sigma_cells, sigma_diameter, cut, table_first, table_count, table_weights, mode):
     """out[k, p] = sum_nodes w_p(node) fields[k][node] for k = 0..m-1, one stencil computation per droplet.
 
     components: (m,) int64 (0..2 faces, 3 cells); fields: tuple of m arrays of those shapes; out: (m, cap).
     own: (cap,) or (0,): if not empty, also own[p] = sum_cells w_p(cell)^2 (see :func:`self_weight`).
+    table_*, mode: see :func:`droplet_stencils` (:data:`NO_TABLE`, COMPUTE: none).
     """
     m = components.shape[0]
     n_chunks = min(count, CHUNKS)
@@ -208,8 +271,8 @@ def interpolate_many(position, diameter, count, components, fields, out, own, sp
         start = chunk * count // n_chunks
         stop = (chunk + 1) * count // n_chunks
         for p in range(start, stop):
-            sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
-            stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+            droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sigma_cells, sigma_diameter,
+                             cut, idx, wts, counts, table_first, table_count, table_weights, mode)
             for k in range(m):
                 field = fields[k]
                 c = components[k]
@@ -252,7 +315,7 @@ def deposit(position, diameter, value, count, component, out, spacing, lower, sh
     """
     deposit_many(position, diameter, np.asarray(value, dtype=float).reshape(1, -1), count,
                  np.array([component], dtype=np.int64), (out,), spacing, lower, shape, periodic, sigma_cells,
-                 sigma_diameter, cut, scratch.reshape(scratch.shape[0], 1, *scratch.shape[1:]))
+                 sigma_diameter, cut, scratch.reshape(scratch.shape[0], 1, *scratch.shape[1:]), *NO_TABLE, COMPUTE)
 
 
 def interpolate(position, diameter, count, component, field, out, spacing, lower, shape, periodic, sigma_cells,
@@ -260,7 +323,7 @@ def interpolate(position, diameter, count, component, field, out, spacing, lower
     """out[p] = sum_nodes w_p(node) field[node] for the array of ``component`` (0..2 faces, 3 cells)."""
     values = np.empty((1, max(count, 1)))
     interpolate_many(position, diameter, count, np.array([component], dtype=np.int64), (field,), values, NO_OWN,
-                     spacing, lower, shape, periodic, sigma_cells, sigma_diameter, cut)
+                     spacing, lower, shape, periodic, sigma_cells, sigma_diameter, cut, *NO_TABLE, COMPUTE)
     out[:count] = values[0, :count]
 
 

@@ -192,6 +192,7 @@ class Simulation:
         self.interpolated = np.zeros((len(INTERPOLATE_COMPONENTS), capacity))
         self.own = np.zeros(capacity)
         self.eps_around = np.ones(capacity)
+        self.table = cp.stencil_table(capacity)  # the droplets' stencils at x^n, shared by the step's three passes
         self.impulse = np.zeros((capacity, 3))
         self.external = np.zeros((capacity, 3))
         self.start_position = np.zeros((capacity, 3))
@@ -213,8 +214,9 @@ class Simulation:
                    *self.kernel, scratch)
         return out
 
-    def deposit_many(self, positions, values, components, outs):
-        """Deposit rows of ``values`` (m, cap) on the arrays ``outs`` (m arrays, of ``components``), one pass."""
+    def deposit_many(self, positions, values, components, outs, mode=cp.COMPUTE):
+        """Deposit rows of ``values`` (m, cap) on the arrays ``outs`` (m arrays, of ``components``), one pass;
+        ``mode``: with the stencil table (see :func:`fulldem.coupling.droplet_stencils`)."""
         m = len(components)
         nx, ny, nz = self.grid.shape
         size = cp.thread_count() * m * (nx + 1) * (ny + 1) * (nz + 1)
@@ -222,7 +224,7 @@ class Simulation:
             self._scratch = np.zeros(size)  # work array for every deposit; its chunks are zeroed by the kernel
         scratch = self._scratch[:size].reshape(cp.thread_count(), m, nx + 1, ny + 1, nz + 1)
         cp.deposit_many(positions, self.store.diameter, values, self.store.count, components, tuple(outs),
-                        *self._grid_args(), *self.kernel, scratch)
+                        *self._grid_args(), *self.kernel, scratch, *self.table, mode)
         return outs
 
     def interpolate(self, positions, field, component, out):
@@ -327,7 +329,7 @@ class Simulation:
         faces = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
         phi_cells = self.grid.zeros_cells()
         flux = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
-        self.deposit_many(s.position, values, DEPOSIT_COMPONENTS, faces + [phi_cells] + flux)
+        self.deposit_many(s.position, values, DEPOSIT_COMPONENTS, faces + [phi_cells] + flux, cp.STORE)
         eps_faces = [np.subtract(1.0, f, out=f) for f in faces]
         if min(float(e.min()) for e in eps_faces) <= 0.0:
             raise FloatingPointError("void fraction reached zero on a face: droplets overfill a cell")
@@ -345,7 +347,7 @@ class Simulation:
         seen = self.interpolated
         cp.interpolate_many(s.position, s.diameter, n, INTERPOLATE_COMPONENTS,
                             (state.u, state.v, state.w, *pressure_force, phi_cells), seen, self.own,
-                            *self._grid_args(), *self.kernel)
+                            *self._grid_args(), *self.kernel, *self.table, cp.LOAD)
         self.fluid_velocity[:n] = seen[:3, :n].T
         self.external[:n] = volume[:, None] * seen[3:6, :n].T \
             + (self.mass[:n] - self.density * volume)[:, None] * self.gravity
@@ -371,7 +373,7 @@ class Simulation:
         # the fluid is owed -J, deposited where the droplets felt the fluid
         values[:3, :n] = -self.impulse[:n].T / (self.dt * self.grid.cell_volume)
         self.owed_force = self.deposit_many(self.start_position, values[:3], INTERPOLATE_COMPONENTS[:3],
-                                            [np.zeros(self.grid.face_shape(a)) for a in range(3)])
+                                            [np.zeros(self.grid.face_shape(a)) for a in range(3)], cp.LOAD)
         self.time += self.dt
         self.steps += 1
         self.remove_exits()

@@ -133,8 +133,9 @@ def test_oseen_factor_limits():
 
 @pytest.mark.parametrize("periodic", [(False, False, False), (True, False, True)])
 def test_fused_passes_match_single_quantity_kernels(periodic):
-    """deposit_many / interpolate_many (one stencil per droplet for several quantities) give exactly what the
-    single-quantity kernels give, and the self weight of the cells comes out of the same pass."""
+    """deposit_many / interpolate_many (one stencil per droplet for several quantities, stored in a table by one
+    pass and loaded by the next) give exactly what the single-quantity kernels give, and the self weight of the
+    cells comes out of the same pass."""
     grid = Grid((12, 10, 14), 0.004, (0.1, -0.02, 0.0), periodic)
     rng = np.random.default_rng(11)
     n = 70
@@ -144,11 +145,17 @@ def test_fused_passes_match_single_quantity_kernels(periodic):
     outs = [_field(grid, c) for c in components]
     nx, ny, nz = grid.shape
     scratch = np.zeros((cp.thread_count(), len(components), nx + 1, ny + 1, nz + 1))
-    cp.deposit_many(pos, diam, values, n, components, tuple(outs), *_args(grid), 1.0, 0.5, CUT, scratch)
+    # the first pass stores the stencils (one droplet too wide for the table: recomputed), the second loads them
+    diam[7] = 0.05
+    table = cp.stencil_table(n)
+    cp.deposit_many(pos, diam, values, n, components, tuple(outs), *_args(grid), 1.0, 0.5, CUT, scratch, *table,
+                    cp.STORE)
+    assert table[1][7, 0, 0] == 0 and (table[1][:, 0, 0] > 0).sum() > n // 2
     fields = [rng.normal(size=o.shape) for o in outs]
     seen = np.zeros((len(components), n))
     own = np.zeros(n)
-    cp.interpolate_many(pos, diam, n, components, tuple(fields), seen, own, *_args(grid), 1.0, 0.5, CUT)
+    cp.interpolate_many(pos, diam, n, components, tuple(fields), seen, own, *_args(grid), 1.0, 0.5, CUT, *table,
+                        cp.LOAD)
     for k, c in enumerate(components):
         single = _field(grid, c)
         cp.deposit(pos, diam, values[k], n, c, single, *_args(grid), 1.0, 0.5, CUT,
