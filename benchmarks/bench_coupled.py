@@ -8,7 +8,8 @@ set-up, compilation and the first step excluded). Wall time per simulated second
 at N = 130 000 (the paper's steady count in the simple model) this is the steady-state cost of the simple case,
 since the feed adds about as many droplets as settle and the count holds.
 
-The machine is shared and noisy: compare ratios within one run, not absolute times across runs.
+The machine is shared and noisy: compare ratios within one run, not absolute times across runs; the minimum and
+median fluid-step times and the 1-minute load average are printed for that reason.
 
     python benchmarks/bench_coupled.py                 # 10 000 and 130 000 droplets
     python benchmarks/bench_coupled.py --n 20000 --steps 10 --case-override fulldem.contact_steps=20
@@ -17,6 +18,7 @@ The machine is shared and noisy: compare ratios within one run, not absolute tim
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import resource
 import time
@@ -68,10 +70,12 @@ def bench(n, steps, overrides):
     sim = Simulation(case, droplets=store, feed=False)
     sim.step()  # compilation and first neighbour build
     setup = time.perf_counter() - t0
-    t1 = time.perf_counter()
+    per_step = []
     for _ in range(steps):
+        t1 = time.perf_counter()
         sim.step()
-    loop = time.perf_counter() - t1
+        per_step.append(time.perf_counter() - t1)
+    loop = sum(per_step)
     count = sim.store.count
     dem_steps = steps * sim.substeps
     return {
@@ -80,6 +84,8 @@ def bench(n, steps, overrides):
         "throughput": count * dem_steps / loop,
         "wall_per_sim_second": loop / (steps * sim.dt),
         "ms_per_fluid_step": 1e3 * loop / steps,
+        "ms_min": 1e3 * min(per_step), "ms_median": 1e3 * float(np.median(per_step)),
+        "load": os.getloadavg()[0],
         "overlap": sim.last["max_overlap_ratio"],
         "rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
     }
@@ -94,13 +100,14 @@ def main():
     args = parser.parse_args()
     print(f"coupled CFD-DEM benchmark on {platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}; shared machine: compare ratios within this run")
-    print(f"{'droplets':>9} {'substeps':>8} {'DEM step':>9} {'ms/fluid step':>13} {'particle-steps/s':>17} "
-          f"{'wall s / sim s':>14} {'max overlap':>11} {'peak RSS':>9}")
+    print(f"{'droplets':>9} {'substeps':>8} {'DEM step':>9} {'ms/fluid step':>13} {'(min, median)':>15} "
+          f"{'particle-steps/s':>17} {'wall s / sim s':>14} {'max overlap':>11} {'peak RSS':>9} {'load':>5}")
     for n in args.n:
         r = bench(n, args.steps, args.case_override)
         print(f"{r['remaining']:>9d} {r['substeps']:>8d} {r['dem_step']:>9.3g} {r['ms_per_fluid_step']:>13.1f} "
-              f"{r['throughput']:>17.3g} {r['wall_per_sim_second']:>14.1f} {r['overlap']:>11.3g} "
-              f"{r['rss_gib']:>7.2f} GiB", flush=True)
+              f"{'(%.0f, %.0f)' % (r['ms_min'], r['ms_median']):>15} {r['throughput']:>17.3g} "
+              f"{r['wall_per_sim_second']:>14.1f} {r['overlap']:>11.3g} {r['rss_gib']:>7.2f} GiB {r['load']:>5.2f}",
+              flush=True)
     print("targets (issue): >= 2e7 particle-steps/s at 130 000 droplets; <= 100 s wall per simulated second of the "
           "simple case at steady state; DEM step >= 5e-5 s")
 
