@@ -161,8 +161,10 @@ NO_WALLS = (False, np.zeros(3), np.ones(3), -1, 0.0, 0.0, 0.0, 0.0)
 def _full_list_forces(store, mass, nl, k_ref, d_ref, zeta, force, walls=NO_WALLS, nchunk=4):
     n = store.count
     candidates = np.zeros((nchunk, max(nl.longest_row, 1)), dtype=np.int32)
+    damping = np.full(nl.index.shape[0], np.nan)
+    dem.pair_damping(nl.start, nl.index, store.diameter, mass, n, k_ref, d_ref, zeta, damping)
     return dem.contact_forces_full(store.position, store.velocity, store.diameter, mass, store.flags, store.partner,
-                                   n, nl.start, nl.index, k_ref, d_ref, zeta, 0, nl.period, nl.inverse_period,
+                                   n, nl.start, nl.index, k_ref, d_ref, damping, 0, nl.period, nl.inverse_period,
                                    *walls, nchunk, candidates, force)
 
 
