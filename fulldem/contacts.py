@@ -27,7 +27,8 @@ loads in the settler (plumes of fed droplets, absorbing bottom) do not build suc
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 from numba import njit
 
