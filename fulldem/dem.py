@@ -289,68 +289,105 @@ def contact_forces_full(position, velocity, diameter, mass, flags, partner, coun
     return worst.max()
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def contact_forces_half(position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref,
-                        diameter_ref, zeta, law, period, inverse_period, nchunk, scratch, force):
-    """Pair forces from a *half* neighbour list with per-thread accumulation: force (overwritten) [N].
+def slab_count(count, longest_jump, threads):
+    """Number of slabs for :func:`contact_forces_half`: even, up to four per thread, each at least twice the longest
+    jump between list partners long (so that slabs processed together never write the same droplet); 1 (serial)
+    when the droplets are too few."""
+    slabs = 4 * max(int(threads), 1)
+    while slabs >= 2 and count // slabs < 2 * longest_jump + 1:
+        slabs -= 2
+    return max(slabs, 1)
 
-    ``scratch`` (threads, cap, 3) holds each thread's partial forces (zeroed here); they are summed into ``force``
-    afterwards. Returns the largest overlap ratio [-]. Mutual coalescence partners exert no force on each other.
-    """
-    periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
-    nthread = scratch.shape[0]
-    for t in prange(nthread):
-        for i in range(t * count // nthread, (t + 1) * count // nthread):
-            for a in range(nthread):
-                scratch[a, i, 0] = 0.0
-                scratch[a, i, 1] = 0.0
-                scratch[a, i, 2] = 0.0
-    worst = np.zeros(nchunk)
-    for c in prange(nchunk):
-        buf = scratch[numba.get_thread_id()]
-        local = 0.0
-        for i in range(c * count // nchunk, (c + 1) * count // nchunk):
-            xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
+
+@njit(cache=True, inline="always")
+def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref,
+               diameter_ref, damping, law, periodic_any, period, inverse_period, walls, wall_lower, wall_upper,
+               outlet_side, outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching, force):
+    """Add the forces of the half-list rows of slab s (each pair to both droplets, and the walls') to ``force``;
+    returns the largest overlap ratio."""
+    local = 0.0
+    for i in range(s * count // nslab, (s + 1) * count // nslab):
+        xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
+        di = diameter[i]
+        skip = _mutual_partner(i, flags, partner)
+        found = 0
+        for k in range(start[i], start[i + 1]):
+            j = index[k]
+            r2 = _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period)[3]
+            reach = 0.5 * (di + diameter[j])
+            touching[found] = k
+            found += (r2 < reach * reach) & (r2 > 0.0) & (j != skip)
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        if found:
             ui, vi, wi = velocity[i, 0], velocity[i, 1], velocity[i, 2]
-            di = diameter[i]
-            skip = _mutual_partner(i, flags, partner)
-            fx = 0.0
-            fy = 0.0
-            fz = 0.0
-            for k in range(start[i], start[i + 1]):
+            for t in range(found):
+                k = touching[t]
                 j = index[k]
-                r2 = _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period)[3]
-                reach = 0.5 * (di + diameter[j])
-                if r2 >= reach * reach or r2 == 0.0 or j == skip:
-                    continue
-                gamma = _damping_of_pair(diameter, mass, i, j, stiffness_ref, diameter_ref, zeta)
                 gx, gy, gz, overlap, small = _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi, di,
-                                                         stiffness_ref, diameter_ref, gamma, law, periodic_any,
+                                                         stiffness_ref, diameter_ref, damping[k], law, periodic_any,
                                                          period, inverse_period)
                 fx += gx
                 fy += gy
                 fz += gz
-                buf[j, 0] -= gx
-                buf[j, 1] -= gy
-                buf[j, 2] -= gz
+                force[j, 0] -= gx
+                force[j, 1] -= gy
+                force[j, 2] -= gz
                 if overlap > local * small:
                     local = overlap / small
-            buf[i, 0] += fx
-            buf[i, 1] += fy
-            buf[i, 2] += fz
-        worst[c] = local
-    for t in prange(nthread):
-        for i in range(t * count // nthread, (t + 1) * count // nthread):
-            sx = 0.0
-            sy = 0.0
-            sz = 0.0
-            for a in range(nthread):
-                sx += scratch[a, i, 0]
-                sy += scratch[a, i, 1]
-                sz += scratch[a, i, 2]
-            force[i, 0] = sx
-            force[i, 1] = sy
-            force[i, 2] = sz
+        if walls:
+            gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, mass, wall_lower, wall_upper,
+                                            outlet_side, outlet_height, outlet_transverse, outlet_radius,
+                                            stiffness_ref, diameter_ref, wall_zeta, law)
+            fx += gx
+            fy += gy
+            fz += gz
+            local = max(local, ratio)
+        force[i, 0] += fx
+        force[i, 1] += fy
+        force[i, 2] += fz
+    return local
+
+
+def slab_count(count, longest_jump, threads=None):
+    """Number of slabs for the half-list kernels: even, at most 8, each at least twice the longest jump between
+    list partners long (so that slabs processed together never write the same droplet); 1 (serial) when the
+    droplets are too few. It does not depend on the thread count, so neither do the results (``threads`` is
+    accepted for compatibility and ignored)."""
+    slabs = 8
+    while slabs >= 2 and count // slabs < 2 * longest_jump + 1:
+        slabs -= 2
+    return max(slabs, 1)
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
+def contact_forces_half(position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref,
+                        diameter_ref, damping, law, period, inverse_period, walls, wall_lower, wall_upper, outlet_side,
+                        outlet_height, outlet_transverse, outlet_radius, wall_zeta, nslab, candidates, force):
+    """Pair forces from a *half* neighbour list (each pair once), plus the walls' if ``walls``: force (overwritten).
+
+    Each pair's force is computed once and added to both droplets. The droplets are cut into ``nslab`` slabs of
+    consecutive indices (:func:`slab_count`); the even slabs run in parallel, then the odd ones. A slab writes only
+    within the longest jump between partners of its own indices, and slabs two apart are at least twice that jump
+    apart, so no two threads write the same droplet, without per-thread copies of the force array. The result does
+    not depend on the thread count or timing. ``candidates`` (nslab, longest row) int32: work rows; other arguments
+    as :func:`contact_forces_full`. Returns the largest overlap ratio [-].
+    """
+    periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
+    for s in prange(nslab):
+        for i in range(s * count // nslab, (s + 1) * count // nslab):
+            force[i, 0] = 0.0
+            force[i, 1] = 0.0
+            force[i, 2] = 0.0
+    worst = np.zeros(nslab)
+    for phase in range(2):
+        for q in prange((nslab - phase + 1) // 2):
+            s = 2 * q + phase
+            worst[s] = _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index,
+                                  stiffness_ref, diameter_ref, damping, law, periodic_any, period, inverse_period,
+                                  walls, wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse,
+                                  outlet_radius, wall_zeta, candidates[s], force)
     return worst.max()
 
 
@@ -606,6 +643,90 @@ def step_fused(position, velocity, position_next, velocity_next, diameter, mass,
     return worst.max(), math.sqrt(travel.max())
 
 
+@njit(cache=True, inline="always")
+def _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride, body_acceleration, h,
+               track, impulse, drift):
+    """Finish the step of slab s's droplets with their force; with ``drift`` also start the next step and zero the
+    force for the next accumulation. Returns the largest squared displacement [m^2]."""
+    moved = 0.0
+    half_h = 0.5 * h
+    for p in range(s * count // nslab, (s + 1) * count // nslab):
+        if drift:
+            moved = max(moved, _kick_drift(p, position, velocity, force[p, 0], force[p, 1], force[p, 2], mass, drag,
+                                           fluid_velocity, stride, body_acceleration, h, track, impulse, position,
+                                           velocity))
+            force[p, 0] = 0.0
+            force[p, 1] = 0.0
+            force[p, 2] = 0.0
+        else:
+            m = mass[p]
+            kick_end = drag[p, 2] / h
+            for a in range(3):
+                acc = force[p, a] / m + body_acceleration[a]
+                velocity[p, a] += acc * kick_end
+                if track:
+                    impulse[p, a] += m * acc * (kick_end - half_h)
+    return moved
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
+def step_half(position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref, diameter_ref,
+              damping, law, period, inverse_period, walls, wall_lower, wall_upper, outlet_side, outlet_height,
+              outlet_transverse, outlet_radius, wall_zeta, drag, fluid_velocity, body_acceleration, h, nslab,
+              candidates, impulse, force, even_pending, last):
+    """One step of the half-list scheme in two parallel phases (three for the ``last`` step).
+
+    Phase A, even slabs: (if ``even_pending``) finish their previous step and start this one
+    (:func:`integrate_kick_drift`), then add their rows' forces. Phase B, odd slabs: add their rows' forces, which
+    completes their droplets' forces (no other slab running later writes them), then kick-drift them. The even
+    slabs' droplets are left pending (their forces are complete only after phase B); the next call finishes them
+    first. ``force`` must be zero on entry except for pending even droplets, and is left so. With ``last`` both
+    parities only finish the step (no drift) and ``force`` keeps the forces at the final positions. Same
+    partitioning rules as :func:`contact_forces_half`. Returns (largest overlap ratio [-], largest displacement [m]).
+    """
+    periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
+    stride = 1 if fluid_velocity.shape[0] > 1 else 0
+    track = impulse.shape[0] > 0
+    worst = np.zeros(nslab)
+    travel = np.zeros(nslab)
+    for q in prange((nslab + 1) // 2):
+        s = 2 * q
+        if even_pending:
+            travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
+                                   body_acceleration, h, track, impulse, True)
+        worst[s] = _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index,
+                              stiffness_ref, diameter_ref, damping, law, periodic_any, period, inverse_period, walls,
+                              wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse, outlet_radius,
+                              wall_zeta, candidates[s], force)
+    for q in prange(nslab // 2):
+        s = 2 * q + 1
+        worst[s] = _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index,
+                              stiffness_ref, diameter_ref, damping, law, periodic_any, period, inverse_period, walls,
+                              wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse, outlet_radius,
+                              wall_zeta, candidates[s], force)
+        travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
+                               body_acceleration, h, track, impulse, not last)
+    if last:
+        for q in prange((nslab + 1) // 2):
+            _slab_kick(2 * q, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
+                       body_acceleration, h, track, impulse, False)
+    return worst.max(), math.sqrt(travel.max())
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
+def finish_even_slabs(position, velocity, force, mass, drag, fluid_velocity, body_acceleration, h, count, nslab,
+                      impulse):
+    """Kick-drift the pending even slabs of :func:`step_half` (all droplets then at the same time level, forces
+    zero), e.g. before a neighbour-list rebuild. Returns the largest displacement [m]."""
+    stride = 1 if fluid_velocity.shape[0] > 1 else 0
+    track = impulse.shape[0] > 0
+    travel = np.zeros(nslab)
+    for q in prange((nslab + 1) // 2):
+        travel[2 * q] = _slab_kick(2 * q, nslab, count, position, velocity, force, mass, drag, fluid_velocity,
+                                   stride, body_acceleration, h, track, impulse, True)
+    return math.sqrt(travel.max())
+
+
 def integrate_reference(position, velocity, force_old, force_new_of, mass, beta, fluid_velocity, body_acceleration,
                         h, count):
     """NumPy twin of one whole step; ``force_new_of(position, velocity)`` gives the force at the new state.
@@ -661,8 +782,9 @@ class DemStepper:
     Parameters: box ``lower``/``size`` (3,) [m], ``periodic`` (3,) bool, step ``h`` [s], contact ``stiffness_ref``
     [N/m] at ``diameter_ref`` [m], ``restitution`` [-] of droplet pairs and ``wall_restitution`` [-] (default: the
     same), ``skin`` [m], ``body_acceleration`` (3,) [m/s^2], ``law`` (a key of :data:`contacts.CONTACT_LAWS`),
-    ``absorbing_bottom``, ``outlet`` (side, height, transverse, radius) or None, ``half_list`` (half list with
-    per-thread sums instead of a full list), ``sort_on_rebuild``, ``cell_diameter`` [m] (None: 99th percentile).
+    ``absorbing_bottom``, ``outlet`` (side, height, transverse, radius) or None, ``half_list`` (default; False: a
+    full list, each pair computed from both sides but a whole step in one pass -- measured slower on the benchmark,
+    1.5x single-threaded), ``sort_on_rebuild``, ``cell_diameter`` [m] (None: 99th percentile).
 
     The caller (the coupling) owns the drag: :meth:`set_drag` with beta (cap,) [kg/s] whenever it changes, the fluid
     velocity at the droplets (cap, 3) or (1, 3) [m/s] and the ``impulse`` accumulator (cap, 3) [N s] passed to
@@ -677,7 +799,7 @@ class DemStepper:
 
     def __init__(self, store, lower, size, periodic, h, stiffness_ref, diameter_ref, restitution, skin,
                  body_acceleration, wall_restitution=None, law="hooke", absorbing_bottom=False, outlet=None,
-                 half_list=False, sort_on_rebuild=True, cell_diameter=None):
+                 half_list=True, sort_on_rebuild=True, cell_diameter=None):
         self.store = store
         self.lower = np.asarray(lower, dtype=float)
         self.size = np.asarray(size, dtype=float)
@@ -702,7 +824,6 @@ class DemStepper:
         self.mass = np.zeros(0)
         self.force = np.zeros((0, 3))
         self.drag = np.zeros((0, 3))
-        self.scratch = np.zeros((numba.get_num_threads(), 0, 3))
         self.candidates = np.zeros((0, 0), dtype=np.int32)
         self.damping = np.zeros(0)
         self._spare_position = np.zeros((0, 3))
@@ -721,8 +842,6 @@ class DemStepper:
             self.mass = np.zeros(store.capacity)
             self.force = np.zeros((store.capacity, 3))
             self.drag = np.zeros((store.capacity, 3))
-            if self.neighbours.half:
-                self.scratch = np.zeros((numba.get_num_threads(), store.capacity, 3))
         if self.sort_on_rebuild and n:
             reorder_store(store, self.neighbours.spatial_order(store.position, store.diameter, n))
         droplet_masses(store.diameter, store.density, n, self.mass)
@@ -745,10 +864,8 @@ class DemStepper:
         self._refresh_damping()
 
     def _refresh_damping(self) -> None:
-        """Per-entry dashpot coefficients of the (full) list, from the current sizes and masses."""
+        """Per-entry dashpot coefficients of the list, from the current sizes and masses."""
         nl, s = self.neighbours, self.store
-        if nl.half:
-            return
         if self.damping.shape[0] < nl.index.shape[0]:
             self.damping = np.zeros(nl.index.shape[0])
         pair_damping(nl.start, nl.index, s.diameter, self.mass, nl.count, self.stiffness_ref, self.diameter_ref,
@@ -765,14 +882,12 @@ class DemStepper:
         nchunk = _chunks(n)
         walls = not self.periodic.all()
         if nl.half:
+            nslab = slab_count(n, nl.longest_jump, numba.get_num_threads())
+            self._ensure_candidates(nslab)
             worst = contact_forces_half(s.position, s.velocity, s.diameter, self.mass, s.flags, s.partner, n,
-                                        nl.start, nl.index, self.stiffness_ref, self.diameter_ref, self.zeta,
-                                        self.law, nl.period, nl.inverse_period, nchunk, self.scratch, self.force)
-            if walls:
-                worst = max(worst, wall_forces(s.position, s.velocity, s.diameter, self.mass, n, self.lower,
-                                               self.upper, self.periodic, self.absorbing_bottom, *self.outlet,
-                                               self.stiffness_ref, self.diameter_ref, self.wall_zeta, self.law,
-                                               nchunk, self.force))
+                                        nl.start, nl.index, self.stiffness_ref, self.diameter_ref, self.damping,
+                                        self.law, nl.period, nl.inverse_period, walls, *self.planes, *self.outlet,
+                                        self.wall_zeta, nslab, self.candidates, self.force)
         else:
             self._ensure_candidates(nchunk)
             worst = contact_forces_full(s.position, s.velocity, s.diameter, self.mass, s.flags, s.partner, n,
@@ -814,26 +929,17 @@ class DemStepper:
     def _advance(self, steps, fluid_velocity, impulse):
         s, n, nl = self.store, self.store.count, self.neighbours
         nchunk = _chunks(n)
-        # one pass per step when nothing else enters the force (a subclass that adds forces in compute_forces, or a
-        # half list, takes the two-pass path)
-        fused = not nl.half and type(self).compute_forces is DemStepper.compute_forces
-        order = None
+        # a whole step per kernel call when nothing else enters the force (a subclass that adds forces in
+        # compute_forces takes the general path: forces, then kick and drift of consecutive steps in one pass)
+        fused = type(self).compute_forces is DemStepper.compute_forces
+        self._order = None
         self._travel_bound += integrate_initial(s.position, s.velocity, self.force, self.mass, self.drag,
                                                 fluid_velocity, self.body_acceleration, self.h, n, nchunk, impulse)
+        if fused and nl.half:
+            self._advance_half(steps, fluid_velocity, impulse)
+            return self._order
         for k in range(steps):
-            if self.periodic.any():
-                wrap_positions(s.position, n, self.lower, nl.period)
-            # the sum of the steps' largest displacements bounds every droplet's travel since the build
-            if self._travel_bound > 0.5 * nl.skin and nl.needs_rebuild(s.position, s.diameter, n):
-                if self.sort_on_rebuild:
-                    new = nl.spatial_order(s.position, s.diameter, n)
-                    reorder_store(s, new)
-                    for arr in (self.mass, self.drag, impulse) + ((fluid_velocity,) if len(fluid_velocity) > 1
-                                                                  else ()):
-                        if len(arr) >= n:
-                            arr[:n] = arr[:n][new]
-                    order = new if order is None else order[new]
-                self._build_list()
+            self._keep_list(fluid_velocity, impulse)
             if k + 1 == steps:
                 self.compute_forces()
                 integrate_final(s.velocity, self.force, self.mass, self.drag, self.body_acceleration, self.h, n,
@@ -846,7 +952,56 @@ class DemStepper:
                                                            fluid_velocity, self.body_acceleration, self.h, n,
                                                            nchunk, impulse)
             self.steps += 1
-        return order
+        return self._order
+
+    def _keep_list(self, fluid_velocity, impulse) -> None:
+        """Wrap periodic positions; rebuild (and re-sort) the list when a droplet may have travelled skin/2."""
+        s, n, nl = self.store, self.store.count, self.neighbours
+        if self.periodic.any():
+            wrap_positions(s.position, n, self.lower, nl.period)
+        # the sum of the steps' largest displacements bounds every droplet's travel since the build
+        if self._travel_bound > 0.5 * nl.skin and nl.needs_rebuild(s.position, s.diameter, n):
+            if self.sort_on_rebuild:
+                new = nl.spatial_order(s.position, s.diameter, n)
+                reorder_store(s, new)
+                for arr in (self.mass, self.drag, self.force, impulse) + (
+                        (fluid_velocity,) if len(fluid_velocity) > 1 else ()):
+                    if len(arr) >= n:
+                        arr[:n] = arr[:n][new]
+                self._order = new if self._order is None else self._order[new]
+            self._build_list()
+
+    def _advance_half(self, steps, fluid_velocity, impulse):
+        """Whole steps with the half list, two parallel phases each (:func:`step_half`)."""
+        s, n, nl = self.store, self.store.count, self.neighbours
+        self.force[:n] = 0.0
+        pending = False
+        nslab = slab_count(n, nl.longest_jump)
+        for k in range(steps):
+            if self.periodic.any():
+                wrap_positions(s.position, n, self.lower, nl.period)
+            if self._travel_bound > 0.5 * nl.skin:
+                if pending:  # bring every droplet to the same time level before checking the list
+                    self._travel_bound += finish_even_slabs(s.position, s.velocity, self.force, self.mass,
+                                                            self.drag, fluid_velocity, self.body_acceleration,
+                                                            self.h, n, nslab, impulse)
+                    pending = False
+                builds = nl.builds
+                self._keep_list(fluid_velocity, impulse)
+                if nl.builds != builds:
+                    nslab = slab_count(n, nl.longest_jump)
+            self._ensure_candidates(nslab)
+            last = k + 1 == steps
+            worst, moved = step_half(s.position, s.velocity, s.diameter, self.mass, s.flags, s.partner, n, nl.start,
+                                     nl.index, self.stiffness_ref, self.diameter_ref, self.damping, self.law,
+                                     nl.period, nl.inverse_period, not self.periodic.all(), *self.planes,
+                                     *self.outlet, self.wall_zeta, self.drag, fluid_velocity,
+                                     self.body_acceleration, self.h, nslab, self.candidates, impulse, self.force,
+                                     pending, last)
+            self.max_overlap_ratio = worst
+            self._travel_bound += moved
+            pending = not last
+            self.steps += 1
 
     def _step_fused(self, fluid_velocity, impulse, nchunk):
         """Forces and kick-drift in one pass (:func:`step_fused`), into the spare state arrays, which then become
@@ -877,7 +1032,7 @@ NO_IMPULSE = np.zeros((0, 3))
 
 
 def run_dem(store, steps, h, box_size, stiffness_ref, diameter_ref, restitution, wall_restitution, skin,
-            body_acceleration, viscosity, report_steps=(), half_list=False, track_impulse=True):
+            body_acceleration, viscosity, report_steps=(), half_list=True, track_impulse=True):
     """DEM-only run in a closed box with all six walls and linear Stokes drag beta = 3 pi mu d in still fluid.
 
     Returns a dict: ``loop_seconds`` (the stepping loop only, set-up and first build excluded), ``rebuilds``

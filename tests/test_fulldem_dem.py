@@ -202,9 +202,13 @@ def test_contact_kernels_match_numpy_twin(periodic, half):
     force = np.full((n, 3), np.nan)
     law = contacts.contact_law_code("hooke")
     if half:
+        damping = np.full(nl.index.shape[0], np.nan)
+        dem.pair_damping(nl.start, nl.index, store.diameter, mass, n, 3.0, 0.5e-3, zeta, damping)
+        nslab = dem.slab_count(n, nl.longest_jump, 2)
         worst = dem.contact_forces_half(store.position, store.velocity, store.diameter, mass, store.flags,
-                                        store.partner, n, nl.start, nl.index, 3.0, 0.5e-3, zeta, law, nl.period,
-                                        nl.inverse_period, 4, np.zeros((3, n, 3)), force)
+                                        store.partner, n, nl.start, nl.index, 3.0, 0.5e-3, damping, law, nl.period,
+                                        nl.inverse_period, *NO_WALLS, nslab,
+                                        np.zeros((nslab, nl.longest_row), dtype=np.int32), force)
     else:
         worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, zeta, force)
     bi, bj = nb.brute_force_pairs(store.position, store.diameter, n, 0.0, box, periodic)
@@ -218,6 +222,42 @@ def test_contact_kernels_match_numpy_twin(periodic, half):
     delta -= nl.period * np.rint(delta * nl.inverse_period)
     assert np.linalg.norm(delta) < 0.5 * (store.diameter[0] + store.diameter[1])
     assert np.abs(force.sum(axis=0)).max() < 1e-13 * np.abs(force).max()
+
+
+def test_half_list_slabs_agree_with_one_slab_and_with_the_full_list():
+    # a few thousand spatially sorted droplets: several slabs run in parallel, each writing its partners' forces
+    rng = np.random.default_rng(21)
+    n = 4000
+    box = np.array([0.006, 0.006, 0.03])
+    store = DropletStore(n)
+    store.add(rng.uniform(0, 1, (n, 3)) * box, rng.uniform(0.35e-3, 0.65e-3, n), RHO,
+              velocity=rng.normal(0, 1e-3, (n, 3)))
+    half = nb.NeighbourList((0, 0, 0), box, (False, False, False), 0.1e-3, half=True)
+    nb.reorder_store(store, half.spatial_order(store.position, store.diameter, n))
+    half.build(store.position, store.diameter, n)
+    mass = np.asarray(store.mass(), dtype=float)
+    damping = np.zeros(half.index.shape[0])
+    dem.pair_damping(half.start, half.index, store.diameter, mass, n, 3.0, 0.5e-3, 0.2, damping)
+    safe = [s for s in (2, 4, 6, 8) if n // s >= 2 * half.longest_jump + 1]
+    assert len(safe) >= 2 and dem.slab_count(n, half.longest_jump, 2) == max(safe)
+    assert dem.slab_count(n, n // 3, 2) == 1
+    results = []
+    for nslab in [1, *safe]:
+        force = np.full((n, 3), np.nan)
+        candidates = np.zeros((nslab, half.longest_row), dtype=np.int32)
+        worst = dem.contact_forces_half(store.position, store.velocity, store.diameter, mass, store.flags,
+                                        store.partner, n, half.start, half.index, 3.0, 0.5e-3, damping, 0,
+                                        half.period, half.inverse_period, *NO_WALLS, nslab, candidates, force)
+        results.append((force, worst))
+    full = nb.NeighbourList((0, 0, 0), box, (False, False, False), 0.1e-3, half=False)
+    full.build(store.position, store.diameter, n)
+    force_full = np.zeros((n, 3))
+    worst_full = _full_list_forces(store, mass, full, 3.0, 0.5e-3, 0.2, force_full)
+    scale = np.abs(force_full).max()
+    assert worst_full > 0.01
+    for force, worst in results:
+        np.testing.assert_allclose(force, force_full, rtol=0, atol=1e-13 * scale)
+        assert worst == pytest.approx(worst_full, rel=1e-14)
 
 
 def test_coalescing_couple_exerts_no_force():
@@ -320,13 +360,14 @@ def test_integrator_kernels_match_numpy_twin(uniform_fluid):
     assert moved == pytest.approx(np.linalg.norm(x - pos, axis=1).max(), rel=1e-12)
 
 
-def test_advance_equals_repeated_steps_with_resorting():
+@pytest.mark.parametrize("half_list", [True, False])
+def test_advance_equals_repeated_steps_with_resorting(half_list):
     runs = []
     for fused in (False, True):
         store, _, _ = _cluster(np.random.default_rng(12), n=50)
         store.velocity[:50] *= 300.0  # fast enough to trigger rebuilds (and re-sorting) within the run
         stepper = dem.DemStepper(store, (0, 0, 0), (0.004, 0.004, 0.004), (True, False, True), 2e-5, 5.0, 0.5e-3,
-                                 0.5, 0.05e-3, (0, 0, -3.75))
+                                 0.5, 0.05e-3, (0, 0, -3.75), half_list=half_list)
         stepper.droplets_changed()
         beta = 3 * math.pi * MU * store.diameter[:50]
         stepper.set_drag(beta)
