@@ -208,6 +208,17 @@ def wall_planes(box_lower, box_upper, periodic, absorbing_bottom):
 #: and on a machine shared with other busy processes a small parallel step waits for a descheduled thread.
 PARALLEL_MIN_DROPLETS = 2000
 
+#: Steps between two timings of one thread against all (``DemStepper(threads=None)``), and steps per timing.
+THREAD_PROBE_EVERY = 500
+THREAD_PROBE_STEPS = 10
+
+
+def _compose(order, new):
+    """Permutation after two re-sortings: new p is old order[new[p]] (None: no re-sorting)."""
+    if new is None:
+        return order
+    return new if order is None else order[new]
+
 
 def _chunks(count):
     """Number of work chunks for a parallel loop: a few per thread (load balance), at least one."""
@@ -660,9 +671,10 @@ def _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_vel
             force[p, 2] = 0.0
         else:
             m = mass[p]
+            inv_m = 1.0 / m
             kick_end = drag[p, 2] / h
             for a in range(3):
-                acc = force[p, a] / m + body_acceleration[a]
+                acc = force[p, a] * inv_m + body_acceleration[a]
                 velocity[p, a] += acc * kick_end
                 if track:
                     impulse[p, a] += m * acc * (kick_end - half_h)
@@ -784,7 +796,8 @@ class DemStepper:
     same), ``skin`` [m], ``body_acceleration`` (3,) [m/s^2], ``law`` (a key of :data:`contacts.CONTACT_LAWS`),
     ``absorbing_bottom``, ``outlet`` (side, height, transverse, radius) or None, ``half_list`` (default; False: a
     full list, each pair computed from both sides but a whole step in one pass -- measured slower on the benchmark,
-    1.5x single-threaded), ``sort_on_rebuild``, ``cell_diameter`` [m] (None: 99th percentile).
+    1.5x single-threaded), ``sort_on_rebuild``, ``cell_diameter`` [m] (None: 99th percentile), ``threads`` (None:
+    chosen by timing, see :meth:`advance`).
 
     The caller (the coupling) owns the drag: :meth:`set_drag` with beta (cap,) [kg/s] whenever it changes, the fluid
     velocity at the droplets (cap, 3) or (1, 3) [m/s] and the ``impulse`` accumulator (cap, 3) [N s] passed to
@@ -799,7 +812,7 @@ class DemStepper:
 
     def __init__(self, store, lower, size, periodic, h, stiffness_ref, diameter_ref, restitution, skin,
                  body_acceleration, wall_restitution=None, law="hooke", absorbing_bottom=False, outlet=None,
-                 half_list=True, sort_on_rebuild=True, cell_diameter=None):
+                 half_list=True, sort_on_rebuild=True, cell_diameter=None, threads=None):
         self.store = store
         self.lower = np.asarray(lower, dtype=float)
         self.size = np.asarray(size, dtype=float)
@@ -819,6 +832,8 @@ class DemStepper:
         self.outlet = (int(side), float(height), float(transverse), float(radius))
         self.planes = wall_planes(self.lower, self.upper, self.periodic, self.absorbing_bottom)
         self.sort_on_rebuild = bool(sort_on_rebuild)
+        self.threads = None if threads is None else max(1, int(threads))
+        self._auto_threads = None
         self.neighbours = NeighbourList(self.lower, self.size, self.periodic, skin, half=half_list,
                                         cell_diameter=cell_diameter)
         self.mass = np.zeros(0)
@@ -905,12 +920,18 @@ class DemStepper:
     def advance(self, steps, fluid_velocity, impulse):
         """Advance by ``steps`` steps h with the drag and fluid velocity frozen (one fluid step's DEM sub-steps).
 
-        Between two steps the second half of one and the first half of the next run as one pass
-        (:func:`integrate_kick_drift`), or, with a full list and no subclass forces, whole steps run as one pass
-        (:func:`step_fused`, double-buffered: the store's ``position`` and ``velocity`` arrays are then replaced by
-        the stepper's spare ones -- hold no references to them across calls). The last step ends complete.
-        ``max_overlap_ratio`` is that of the last step. Returns the droplet permutation if the droplets were
-        re-sorted (new p is old order[p]), else None.
+        Consecutive steps run fused: a half-list step in two parallel phases (:func:`step_half`), a full-list step
+        in one double-buffered pass (:func:`step_fused`; the store's ``position`` and ``velocity`` arrays are then
+        replaced by the stepper's spare ones -- hold no references to them across calls), or, when a subclass adds
+        forces in :meth:`compute_forces`, forces then kick-drift (:func:`integrate_kick_drift`). The last step ends
+        complete. ``max_overlap_ratio`` is that of the last step. Returns the droplet permutation if the droplets
+        were re-sorted (new p is old order[p]), else None.
+
+        Threads: one below :data:`PARALLEL_MIN_DROPLETS` droplets; else ``threads``, or when None the faster of one
+        and all threads, re-timed every :data:`THREAD_PROBE_EVERY` steps in long advances (on a machine shared with
+        other busy processes, threads that wait for each other at every phase can be slower than one). The results
+        do not depend on the thread count (the timed choice splits the advance into segments, which changes them at
+        round-off: fused multiply-adds fall differently at segment ends).
         """
         if not self._ready:
             self.droplets_changed()
@@ -918,11 +939,37 @@ class DemStepper:
             raise RuntimeError("dem: call set_drag(beta) after droplets_changed() / sizes_changed()")
         if steps <= 0:
             return None
+        steps = int(steps)
         threads = numba.get_num_threads()
-        if self.store.count < PARALLEL_MIN_DROPLETS:
-            numba.set_num_threads(1)
+        if self.store.count < PARALLEL_MIN_DROPLETS or threads == 1:
+            fixed = 1
+        elif self.threads is not None:
+            fixed = min(self.threads, threads)
+        elif steps < 4 * THREAD_PROBE_STEPS:
+            fixed = self._auto_threads or threads
+        else:
+            fixed = None
+        order = None
         try:
-            return self._advance(int(steps), fluid_velocity, impulse)
+            if fixed is not None:
+                numba.set_num_threads(fixed)
+                return self._advance(steps, fluid_velocity, impulse)
+            done = 0
+            while done < steps:
+                if done % THREAD_PROBE_EVERY == 0 and steps - done >= 4 * THREAD_PROBE_STEPS:
+                    timing = {}
+                    for candidate in (1, threads):
+                        numba.set_num_threads(candidate)
+                        start = time.perf_counter()
+                        order = _compose(order, self._advance(THREAD_PROBE_STEPS, fluid_velocity, impulse))
+                        timing[candidate] = time.perf_counter() - start
+                        done += THREAD_PROBE_STEPS
+                    self._auto_threads = min(timing, key=timing.get)
+                chunk = min(steps - done, THREAD_PROBE_EVERY - done % THREAD_PROBE_EVERY)
+                numba.set_num_threads(self._auto_threads)
+                order = _compose(order, self._advance(chunk, fluid_velocity, impulse))
+                done += chunk
+            return order
         finally:
             numba.set_num_threads(threads)
 
