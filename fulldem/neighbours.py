@@ -242,6 +242,16 @@ def scan_large(position, diameter, large, skin, period, inverse_period, cell_siz
                             counts[j] += 1
 
 
+@njit(cache=True)
+def longest_jump(start, index, count):
+    """Largest |j - i| over the list's entries (i's row holding j)."""
+    jump = 0
+    for i in range(count):
+        for k in range(start[i], start[i + 1]):
+            jump = max(jump, abs(index[k] - i))
+    return jump
+
+
 @njit(cache=True, parallel=True)
 def max_travel(position, reference_position, diameter, reference_diameter, count, period, inverse_period):
     """Largest |x - x_ref| + max(0, (d - d_ref)/2) over the droplets [m] (minimum image on periodic axes).
@@ -292,7 +302,9 @@ class NeighbourList:
     Attributes: ``start`` (n + 1,) int64 and ``index`` (capacity,) int32 (CSR rows; capacity doubles when a build
     needs more), ``half`` (bool), ``skin`` [m], ``count`` (droplets at the last build), ``builds`` (number of
     builds), ``reference_position`` (cap, 3) [m] and ``reference_diameter`` (cap,) [m] at the last build,
-    ``cell_size`` (3,) [m] and ``shape`` (3,) of the last binning, ``longest_row`` (most partners of a droplet).
+    ``cell_size`` (3,) [m] and ``shape`` (3,) of the last binning, ``longest_row`` (most partners of a droplet),
+    ``longest_jump`` (largest |j - i| of an entry: how far apart in memory partners lie, see
+    :func:`fulldem.dem.slab_count`).
 
     Geometry: ``box_lower`` (3,) [m], ``box_size`` (3,) [m], ``periodic`` (3,) bool.
     """
@@ -312,6 +324,7 @@ class NeighbourList:
         self.index = np.zeros(max(int(index_capacity), 1), dtype=np.int32)
         self.count = 0
         self.longest_row = 0
+        self.longest_jump = 0
         self.builds = 0
         self.reference_position = np.zeros((0, 3))
         self.reference_diameter = np.zeros(0)
@@ -409,6 +422,7 @@ class NeighbourList:
                        cursor, extra)
         self.count = count
         self.longest_row = int(np.diff(start).max()) if count else 0
+        self.longest_jump = longest_jump(start, self.index, count)
         self.builds += 1
         self.reference_position = _grow(self.reference_position, count)
         self.reference_diameter = _grow(self.reference_diameter, count)
