@@ -174,7 +174,21 @@ class Simulation:
 
         # coupling tables and work arrays
         self.kernel = (fd.sigma_cells, fd.sigma_diameter, cp.DEFAULT_CUT)
-        self.mobility = np.array([cp.discrete_mobility_factor(r) for r in MOBILITY_RATIOS])
+        self.filtered = None
+        self.mobility_ratios = MOBILITY_RATIOS
+        if fd.kernel == "filtered":
+            try:
+                self.filtered = cp.FilteredKernel(self.grid.shape, self.periodic, fd.sigma_cells, cp.DEFAULT_CUT)
+            except ValueError as error:
+                raise ValueError(f"fulldem.kernel = 'filtered' with fulldem.sigma_cells = {fd.sigma_cells} on a "
+                                 f"{self.grid.shape} grid: {error}; use fulldem.kernel = 'direct'") from None
+            # the filtered kernel's own discrete factor at sigma = sigma_cells h; wider droplets use the direct one
+            wider = MOBILITY_RATIOS[MOBILITY_RATIOS > fd.sigma_cells * (1.0 + 1e-9)]
+            self.mobility_ratios = np.concatenate([[fd.sigma_cells], wider])
+            self.mobility = np.array([cp.filtered_mobility_factor(fd.sigma_cells)]
+                                     + [cp.discrete_mobility_factor(r) for r in wider])
+        else:
+            self.mobility = np.array([cp.discrete_mobility_factor(r) for r in MOBILITY_RATIOS])
         self.oseen_logs, self.oseen_values = cp.oseen_table()
         self.drag_law = DRAG_LAWS[case.drag.law]
         self.viscosity_ratio = case.matte.viscosity / self.viscosity if case.drag.fluid_drop else 0.0
@@ -209,27 +223,78 @@ class Simulation:
 
     def deposit(self, positions, values, component, out):
         """Deposit per-droplet ``values`` (already divided by the cell volume) on ``component`` (0-2 faces, 3 cells)."""
-        scratch = np.zeros((cp.thread_count(), *out.shape))
-        cp.deposit(positions, self.store.diameter, values, self.store.count, component, out, *self._grid_args(),
-                   *self.kernel, scratch)
-        return out
+        rows = np.zeros((1, self.store.capacity))
+        rows[0, : self.store.count] = values[: self.store.count]
+        return self.deposit_many(positions, rows, np.array([component], dtype=np.int64), [out])[0]
 
-    def deposit_many(self, positions, values, components, outs, mode=cp.COMPUTE):
-        """Deposit rows of ``values`` (m, cap) on the arrays ``outs`` (m arrays, of ``components``), one pass;
-        ``mode``: with the stencil table (see :func:`fulldem.coupling.droplet_stencils`)."""
-        m = len(components)
+    def _wide(self):
+        """Indices of the droplets whose kernel is wider than sigma_cells h (they use the direct Gaussian)."""
+        fd, s = self.case.fulldem, self.store
+        return np.nonzero(fd.sigma_diameter * s.diameter[: s.count] > fd.sigma_cells * self.grid.spacing)[0]
+
+    def _scratch_for(self, m):
         nx, ny, nz = self.grid.shape
         size = cp.thread_count() * m * (nx + 1) * (ny + 1) * (nz + 1)
         if getattr(self, "_scratch", np.zeros(0)).size < size:
             self._scratch = np.zeros(size)  # work array for every deposit; its chunks are zeroed by the kernel
-        scratch = self._scratch[:size].reshape(cp.thread_count(), m, nx + 1, ny + 1, nz + 1)
-        cp.deposit_many(positions, self.store.diameter, values, self.store.count, components, tuple(outs),
-                        *self._grid_args(), *self.kernel, scratch, *self.table, mode)
+        return self._scratch[:size].reshape(cp.thread_count(), m, nx + 1, ny + 1, nz + 1)
+
+    def deposit_many(self, positions, values, components, outs, mode=cp.COMPUTE):
+        """Add rows of ``values`` (m, cap), deposited with the coupling kernel, to the arrays ``outs`` (m arrays, of
+        ``components``: 0-2 faces, 3 cells), one pass; ``mode``: with the stencil table (see
+        :func:`fulldem.coupling.droplet_stencils`). Returns ``outs``."""
+        s, n, m = self.store, self.store.count, len(components)
+        if self.filtered is None:
+            cp.deposit_many(positions, s.diameter, values, n, components, tuple(outs), *self._grid_args(),
+                            *self.kernel, self._scratch_for(m), *self.table, mode)
+            return outs
+        wide = self._wide()
+        narrow = values
+        if wide.size:
+            narrow = values.copy()
+            narrow[:, wide] = 0.0
+        raws = [np.zeros(out.shape) for out in outs]
+        # trilinear weights are cheaper to recompute than to load from the stencil table (measured 2x)
+        cp.deposit_many(positions, s.diameter, narrow, n, components, tuple(raws), *self._grid_args(),
+                        *self.kernel, self._scratch_for(m), *cp.NO_TABLE, cp.COMPUTE, True)
+        for raw, out, c in zip(raws, outs, components):
+            out += self.filtered.filter(raw, c)
+        if wide.size:
+            cp.deposit_many(np.ascontiguousarray(positions[wide]), np.ascontiguousarray(s.diameter[wide]),
+                            np.ascontiguousarray(values[:, wide]), wide.size, components, tuple(outs),
+                            *self._grid_args(), *self.kernel, self._scratch_for(m), *cp.NO_TABLE, cp.COMPUTE)
         return outs
 
+    def interpolate_many(self, positions, fields, components, out, own=cp.NO_OWN, mode=cp.COMPUTE):
+        """out[k, p] = the coupling kernel's interpolation of ``fields[k]`` (of ``components``) at droplet p; with
+        ``own`` (cap,), also each droplet's self weight sum_cells w_p^2. Returns ``out``."""
+        s, n = self.store, self.store.count
+        if self.filtered is None:
+            cp.interpolate_many(positions, s.diameter, n, components, tuple(fields), out, own, *self._grid_args(),
+                                *self.kernel, *self.table, mode)
+            return out
+        filtered = tuple(self.filtered.filter(f, c) for f, c in zip(fields, components))
+        cp.interpolate_many(positions, s.diameter, n, components, filtered, out, cp.NO_OWN, *self._grid_args(),
+                            *self.kernel, *cp.NO_TABLE, cp.COMPUTE, True)
+        if own.shape[0]:
+            self.filtered.self_weight(positions, n, self.grid.spacing, self.lower, own)
+        wide = self._wide()
+        if wide.size:
+            part = np.zeros((len(components), wide.size))
+            part_own = np.zeros(wide.size) if own.shape[0] else cp.NO_OWN
+            cp.interpolate_many(np.ascontiguousarray(positions[wide]), np.ascontiguousarray(s.diameter[wide]),
+                                wide.size, components, tuple(fields), part, part_own, *self._grid_args(),
+                                *self.kernel, *cp.NO_TABLE, cp.COMPUTE)
+            out[:, wide] = part
+            if own.shape[0]:
+                own[wide] = part_own
+        return out
+
     def interpolate(self, positions, field, component, out):
-        cp.interpolate(positions, self.store.diameter, self.store.count, component, field, out, *self._grid_args(),
-                       *self.kernel)
+        """out[p] = the coupling kernel's interpolation of ``field`` (of ``component``) at droplet p."""
+        rows = np.zeros((1, max(self.store.capacity, 1)))
+        self.interpolate_many(positions, (field,), np.array([component], dtype=np.int64), rows)
+        out[: self.store.count] = rows[0, : self.store.count]
         return out
 
     def void_fraction(self):
@@ -345,9 +410,8 @@ class Simulation:
         pressure_force = fl.pressure_force_density(self.grid, state.p, self.body_force)
         droplet_masses(s.diameter, s.density, n, self.mass)
         seen = self.interpolated
-        cp.interpolate_many(s.position, s.diameter, n, INTERPOLATE_COMPONENTS,
-                            (state.u, state.v, state.w, *pressure_force, phi_cells), seen, self.own,
-                            *self._grid_args(), *self.kernel, *self.table, cp.LOAD)
+        self.interpolate_many(s.position, (state.u, state.v, state.w, *pressure_force, phi_cells),
+                              INTERPOLATE_COMPONENTS, seen, self.own, cp.LOAD)
         self.fluid_velocity[:n] = seen[:3, :n].T
         self.external[:n] = volume[:, None] * seen[3:6, :n].T \
             + (self.mass[:n] - self.density * volume)[:, None] * self.gravity
@@ -356,7 +420,7 @@ class Simulation:
         np.clip(eps_around[:n], 0.0, 1.0, out=eps_around[:n])
         drag_coefficients(s.diameter, s.velocity, self.fluid_velocity, eps_around, n, self.density, self.viscosity,
                           self.drag_law, fd.hindrance == "di_felice", self.viscosity_ratio, self.grid.spacing,
-                          fd.sigma_cells, fd.sigma_diameter, fd.self_correction, MOBILITY_RATIOS, self.mobility,
+                          fd.sigma_cells, fd.sigma_diameter, fd.self_correction, self.mobility_ratios, self.mobility,
                           self.oseen_logs, self.oseen_values, self.beta)
 
         # DEM sub-steps with the external force held over the fluid step, folded into the fluid velocity (see

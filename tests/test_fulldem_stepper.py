@@ -23,12 +23,13 @@ def _single_droplet(diameter, box, cell, fluid_step, t_end, extra=()):
     return sim, -store.velocity[0, 2]
 
 
-@pytest.mark.parametrize("diameter, tolerance", [(500e-6, 0.02), (2e-3, 0.03)])
-def test_terminal_velocity_with_wall_correction(diameter, tolerance):
+@pytest.mark.parametrize("diameter, tolerance, kernel", [(500e-6, 0.02, "filtered"), (2e-3, 0.03, "filtered"),
+                                                         (500e-6, 0.02, "direct"), (2e-3, 0.03, "direct")])
+def test_terminal_velocity_with_wall_correction(diameter, tolerance, kernel):
     """A droplet released in quiescent slag in the 0.2 m cube reaches the Schiller-Naumann terminal velocity times
     the square-duct wall factor 1/(1 + 1.903 d/L) (Happel & Brenner), within 2 % (500 um) and 3 % (2 mm), with a fluid
-    step of ~32 tau_p for 500 um."""
-    sim, v = _single_droplet(diameter, (0.2, 0.2, 0.2), 0.01, 5e-3, 1.5)
+    step of ~32 tau_p for 500 um; with either coupling kernel."""
+    sim, v = _single_droplet(diameter, (0.2, 0.2, 0.2), 0.01, 5e-3, 1.5, [f"fulldem.kernel={kernel}"])
     expected = sim.terminal_velocity(diameter) * square_duct_factor(diameter / 0.2)
     assert v == pytest.approx(expected, rel=tolerance)
     if diameter == 500e-6:
@@ -64,12 +65,16 @@ def _random_cloud(rng, n, size, d, margin):
     return np.array(out)
 
 
-def test_momentum_balance_in_a_periodic_box():
+@pytest.mark.parametrize("kernel", [[], ["fulldem.kernel=direct"], ["fulldem.sigma_diameter=5"]],
+                         ids=["filtered", "direct", "filtered_and_direct"])
+def test_momentum_balance_in_a_periodic_box(kernel):
     """Fluid + droplets + the impulse owed to the fluid change only by the imposed body forces, to round-off; here
     the mean pressure gradient b balances the droplets' buoyant weight, so the total stays constant while the
-    droplets settle and drag the fluid. Also: the reaction the fluid is owed equals minus the drag impulses."""
+    droplets settle and drag the fluid. Also: the reaction the fluid is owed equals minus the drag impulses. For
+    both coupling kernels, and for a mixture (sigma_diameter = 5: droplets above 1 mm are wider than a cell and
+    take the direct kernel, the others the filtered one)."""
     case = load_case("simple", ["feed.mass_rate=0", "coalescence.enabled=false", "fulldem.cell_size=0.005",
-                                "fulldem.fluid_step=0.002"])
+                                "fulldem.fluid_step=0.002", *kernel])
     rng = np.random.default_rng(4)
     size, n, d = 0.05, 150, 1.2e-3
     store = DropletStore(256)
@@ -79,6 +84,8 @@ def test_momentum_balance_in_a_periodic_box():
     body = (0.0, 0.0, weight / size**3)  # b acts upward on the mixture, per unit volume
     sim = Simulation(case, droplets=store, feed=False, box=((size,) * 3, (0.0, 0.0, 0.0)),
                      periodic=(True, True, True), body_force=body)
+    wide = sim._wide().size
+    assert (wide == 0) if kernel != ["fulldem.sigma_diameter=5"] else (0 < wide < n)
     sim.step()
     start = sim.momentum()
     scale = np.sum(np.abs(sim.impulse[:n]))

@@ -1,0 +1,303 @@
+"""Set-ups of the collective-settling verification cases, shared by tests/test_fulldem_verification.py,
+reports/fulldem_verification.py (runs them all and writes reports/fulldem_verification.md) and
+reports/fulldem_falling_cloud.py (the picture of a cloud turning into a torus).
+
+* Hindered settling: an initially uniform random suspension of monodisperse droplets fills the lower part of a box,
+  periodic in x and y, walls in z (closed top and bottom, so the mixture's volume flux is zero); the height with
+  5 % of the droplets above it (the top interface) descends at the Richardson-Zaki velocity U_St (1 - phi)^4.65
+  (Richardson & Zaki 1954), U_St the single-droplet Schiller-Naumann terminal velocity.
+* Homogeneous suspension: the same in a fully periodic box, settling speed in the frame of zero volume flux.
+* Falling cloud: N droplets of radius a in a ball of radius R fall at U_St (1 + 1.2 N a / R) (Nitsche & Batchelor,
+  JFM 340 (1997)) in unbounded Stokes flow. The box here is periodic, and its images slow the cloud at first order by
+  Hasimoto's (1959) lattice term 2.837 N a U_St / L (the cloud's far field is the Stokeslet of its total weight), so
+  the reference is U_St (1 + 1.2 N a/R - 2.837 N a/L).
+
+All lengths in m, times in s, velocities in m/s.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fulldem import fluid as fl
+from fulldem.coupling import HASIMOTO
+from fulldem.droplets import DropletStore
+from fulldem.stepper import Simulation
+from settler.cases import load_case
+from settler.physics import STANDARD_GRAVITY
+
+SLAG_DENSITY = 3150.0  # kg/m^3, flash_smelting property set
+MATTE_DENSITY = 5100.0  # kg/m^3
+RICHARDSON_ZAKI = 4.65
+NITSCHE_BATCHELOR = 1.2  # 6/5: a drop of suspension, viscosity ratio 1 (Hadamard-Rybczynski)
+
+
+def point_like_overrides(diameter, cell, fluid_step, extra=()):
+    """Case overrides for monodisperse point-like droplets: no feed, no coalescence, the contact stiffness set for
+    ``diameter`` (the feed's mean diameter is the stiffness reference), and contacts softened to max_overlap 0.1
+    with 8 steps per contact: contacts are rare in these dilute suspensions and only need to keep droplets apart,
+    and the DEM then needs a few sub-steps per fluid step instead of ~150."""
+    return ["feed.mass_rate=0", "coalescence.enabled=false", f"feed.mean_diameter={diameter}",
+            "feed.scale_min=0.99", "feed.scale_max=1.01", "fulldem.max_overlap=0.1", "fulldem.contact_steps=8",
+            f"fulldem.cell_size={cell}", f"fulldem.fluid_step={fluid_step}", *extra]
+
+
+def separate(points, diameter, draw, gap, tries=1000, period=None):
+    """Redraw (with ``draw(k)``) the later member of every pair closer than ``gap * diameter`` until none is;
+    ``period``: box edge lengths [m] of a periodic box (distances by minimum image)."""
+    for _ in range(tries):
+        pairs = cKDTree(points, boxsize=period).query_pairs(gap * diameter, output_type="ndarray")
+        if len(pairs) == 0:
+            return points
+        bad = np.unique(pairs[:, 1])
+        points[bad] = draw(len(bad))
+    raise RuntimeError("separate: could not place the droplets without overlap")
+
+
+def random_suspension(rng, count, lower, upper, diameter, gap=1.02):
+    """``count`` non-overlapping centres uniform in the box [lower, upper] [m], each droplet inside it."""
+    lo = np.asarray(lower, float) + 0.5 * gap * diameter
+    hi = np.asarray(upper, float) - 0.5 * gap * diameter
+    return separate(rng.uniform(lo, hi, (count, 3)), diameter, lambda k: rng.uniform(lo, hi, (k, 3)), gap)
+
+
+def random_periodic_suspension(rng, count, size, diameter, gap=1.02):
+    """``count`` centres uniform in the periodic box [0, size), no two closer than ``gap * diameter`` [m]."""
+    size = np.asarray(size, float)
+    return separate(rng.uniform(0.0, 1.0, (count, 3)) * size, diameter,
+                    lambda k: rng.uniform(0.0, 1.0, (k, 3)) * size, gap, period=size)
+
+
+def random_ball(rng, count, centre, radius, diameter, gap=1.05):
+    """``count`` non-overlapping centres uniform in the ball of ``radius`` [m] (droplets inside it) about ``centre``."""
+    inner = radius - 0.5 * diameter
+
+    def draw(k):
+        out = np.empty((0, 3))
+        while len(out) < k:
+            p = rng.uniform(-inner, inner, (2 * k, 3))
+            out = np.concatenate([out, p[np.einsum("ij,ij->i", p, p) <= inner**2]])
+        return out[:k]
+
+    return np.asarray(centre, float) + separate(draw(count), diameter, draw, gap)
+
+
+def hindered_suspension(phi, *, diameter=2e-3, cell=6e-3, width=0.036, height=0.072, fill=0.066, fluid_step=0.01,
+                        seed=1, extra=()):
+    """A uniform random suspension at volume fraction ``phi`` of droplets of ``diameter`` [m] (matte 5100 in slag
+    3150 kg/m^3, 0.45 Pa s) filling the box from the floor to ``fill`` [m]; box width x width x height [m], periodic
+    in x and y, walls in z; droplets touching the floor are removed as settled. Returns the Simulation."""
+    case = load_case("simple", point_like_overrides(diameter, cell, fluid_step, extra))
+    count = int(round(phi * width * width * fill / (math.pi / 6.0 * diameter**3)))
+    positions = random_suspension(np.random.default_rng(seed), count, (0.0, 0.0, 0.0), (width, width, fill),
+                                  diameter)
+    store = DropletStore(count)
+    store.add(positions, diameter, case.matte.density)
+    return Simulation(case, droplets=store, feed=False, box=((width, width, height), (0.0, 0.0, 0.0)),
+                      periodic=(True, True, False))
+
+
+def homogeneous_suspension(phi, *, diameter=2e-3, cell=6e-3, size=0.048, fluid_step=0.01, seed=1, extra=()):
+    """The same droplets filling a fully periodic cube of side ``size`` [m] at volume fraction ``phi``; a uniform
+    upward body force (the mean pressure gradient) carries their total buoyant weight. Returns the Simulation."""
+    case = load_case("simple", point_like_overrides(diameter, cell, fluid_step, extra))
+    count = int(round(phi * size**3 / (math.pi / 6.0 * diameter**3)))
+    positions = random_periodic_suspension(np.random.default_rng(seed), count, (size,) * 3, diameter)
+    store = DropletStore(count)
+    store.add(positions, diameter, case.matte.density)
+    volume = count * math.pi / 6.0 * diameter**3
+    weight = volume * (case.matte.density - case.slag.density) * STANDARD_GRAVITY
+    return Simulation(case, droplets=store, feed=False, box=((size,) * 3, (0.0, 0.0, 0.0)), periodic=(True,) * 3,
+                      body_force=(0.0, 0.0, weight / size**3))
+
+
+def batch_settling_speed(sim):
+    """Settling speed [m/s] of the droplets in the frame of zero mixture volume flux (a batch settler's frame):
+    (1 - phi) (u_f - v), u_f the fluid's interstitial mean velocity, v the droplets' mean velocity (z, downward +).
+    In a periodic box the frame moves: the drag reaction is owed one step, so the total momentum (zero) includes
+    that impulse in transit and fluid and droplets drift upward together; only their difference is physical."""
+    store, n = sim.store, sim.store.count
+    droplet_volume = float(np.sum(math.pi / 6.0 * store.diameter[:n] ** 3))
+    box_volume = float(np.prod(sim.grid.size))
+    fluid_momentum = fl.total_momentum(sim.grid, sim.fluid, sim.density, sim.momentum_eps)[2]
+    fluid_velocity = fluid_momentum / (sim.density * (box_volume - droplet_volume))
+    return (1.0 - droplet_volume / box_volume) * (fluid_velocity - float(store.velocity[:n, 2].mean()))
+
+
+@dataclass
+class FrontRecord:
+    """Time series of a settling suspension: ``front`` [m] is the height with ``quantile`` of the initial droplets
+    above it (settled droplets count as below everything); ``bulk`` [m/s] the mean settling speed of droplets more
+    than 2.5 kernel widths from the front and the floor (nan when there are none)."""
+
+    times: np.ndarray
+    front: np.ndarray
+    bulk: np.ndarray
+    count: int
+    quantile: float
+
+
+def run_hindered(sim, t_end, quantile=0.05):
+    """Step ``sim`` to ``t_end`` [s], recording the front and the bulk speed after every step."""
+    store = sim.store
+    initial = store.count
+    above = int(round(quantile * initial))
+    reach = 2.5 * max(sim.case.fulldem.sigma_cells * sim.grid.spacing,
+                      sim.case.fulldem.sigma_diameter * float(store.diameter[0]))
+    times, front, bulk = [], [], []
+    while sim.time < t_end - 1e-9:
+        sim.step()
+        n = store.count
+        z = store.position[:n, 2]
+        top = float(np.partition(z, n - above - 1)[n - above - 1]) if n > above else math.nan
+        inside = (z > sim.lower[2] + reach) & (z < top - reach)
+        times.append(sim.time)
+        front.append(top)
+        bulk.append(-float(store.velocity[:n, 2][inside].mean()) if inside.any() else math.nan)
+    return FrontRecord(np.array(times), np.array(front), np.array(bulk), initial, quantile)
+
+
+def front_speed(record, t_start):
+    """Descent speed of the front [m/s]: least-squares slope over times >= t_start."""
+    keep = record.times >= t_start - 1e-9
+    return -float(np.polyfit(record.times[keep], record.front[keep], 1)[0])
+
+
+def cloud_overrides(diameter, cell, fluid_step, density_excess, viscosity, extra=()):
+    return point_like_overrides(diameter, cell, fluid_step,
+                                [f"matte.density={SLAG_DENSITY + density_excess}",
+                                 f"slag.viscosity_reference={viscosity}", *extra])
+
+
+@dataclass
+class Cloud:
+    """A falling-cloud set-up: ``count`` droplets of ``diameter`` [m] in a ball of ``radius`` [m] in a periodic cube
+    of side ``box`` [m]; ``stokes`` is the single-droplet terminal velocity [m/s]."""
+
+    sim: Simulation
+    count: int
+    diameter: float
+    radius: float
+    box: float
+    stokes: float
+
+    @property
+    def n_a_over_r(self):
+        return self.count * 0.5 * self.diameter / self.radius
+
+    def nitsche_batchelor(self):
+        """Unbounded Stokes-flow cloud velocity U_St (1 + 1.2 N a/R) [m/s]."""
+        return self.stokes * (1.0 + NITSCHE_BATCHELOR * self.n_a_over_r)
+
+    def reference(self):
+        """The same in the periodic box: minus Hasimoto's first-order image term 2.837 N a U_St / L [m/s]."""
+        return self.nitsche_batchelor() - self.stokes * HASIMOTO * self.count * 0.5 * self.diameter / self.box
+
+    def reynolds(self, velocity):
+        """Cloud Reynolds number rho U 2R / mu [-]."""
+        return self.sim.density * velocity * 2.0 * self.radius / self.sim.viscosity
+
+
+def falling_cloud(n_a_over_r, *, cells_per_radius=4, box_radii=8, cell=5e-3, diameter=1.5e-3, reynolds=0.3,
+                  viscosity=0.45, fluid_step=None, seed=7, extra=()):
+    """A cloud with N a/R ~ ``n_a_over_r`` at rest in a periodic cube of side ``box_radii`` R, R =
+    ``cells_per_radius`` cells. The density excess is chosen so that the Nitsche-Batchelor cloud Reynolds number is
+    ``reynolds``; a uniform upward body force carries the droplets' total buoyant weight (the mean pressure gradient
+    of a periodic box), so the mixture has no net force. fluid_step default: 0.7 of the viscous limit h^2 / (6 nu)."""
+    radius = cells_per_radius * cell
+    box = box_radii * radius
+    count = int(round(n_a_over_r * radius / (0.5 * diameter)))
+    u_cloud = reynolds * viscosity / (SLAG_DENSITY * 2.0 * radius)
+    u_stokes = u_cloud / (1.0 + NITSCHE_BATCHELOR * count * 0.5 * diameter / radius)
+    density_excess = 18.0 * viscosity * u_stokes / (STANDARD_GRAVITY * diameter**2)
+    if fluid_step is None:
+        fluid_step = 0.7 * cell**2 / (6.0 * viscosity / SLAG_DENSITY)
+    case = load_case("simple", cloud_overrides(diameter, cell, fluid_step, density_excess, viscosity, extra))
+    positions = random_ball(np.random.default_rng(seed), count, (0.5 * box,) * 3, radius, diameter)
+    store = DropletStore(count)
+    store.add(positions, diameter, case.matte.density)
+    weight = count * math.pi / 6.0 * diameter**3 * (case.matte.density - case.slag.density) * STANDARD_GRAVITY
+    sim = Simulation(case, droplets=store, feed=False, box=((box,) * 3, (0.0, 0.0, 0.0)), periodic=(True,) * 3,
+                     body_force=(0.0, 0.0, weight / box**3))
+    return Cloud(sim, count, diameter, radius, box, sim.terminal_velocity(diameter))
+
+
+class Unwrapper:
+    """Positions [m] of a periodic run followed across the box's faces, droplets matched by ``ident``."""
+
+    def __init__(self, sim):
+        self.sim = sim
+        self.previous = self._current()
+        self.position = self.previous.copy()
+
+    def _current(self):
+        s = self.sim.store
+        order = np.argsort(s.ident[: s.count])
+        return s.position[: s.count][order].copy()
+
+    def update(self):
+        now = self._current()
+        size = self.sim.grid.size
+        jump = now - self.previous
+        jump -= size * np.round(jump / size)
+        self.position += jump
+        self.previous = now
+        return self.position
+
+
+def run_cloud(cloud, t_end, every=1):
+    """Step to ``t_end`` [s]; returns times [s] and the unwrapped centroid heights [m] every ``every`` steps."""
+    sim = cloud.sim
+    follow = Unwrapper(sim)
+    times, centroid = [0.0], [follow.position[:, 2].mean()]
+    while sim.time < t_end - 1e-9:
+        sim.step()
+        positions = follow.update()
+        if sim.steps % every == 0:
+            times.append(sim.time)
+            centroid.append(positions[:, 2].mean())
+    return np.array(times), np.array(centroid), follow
+
+
+def settling_speed(times, heights, t_start, t_end=math.inf):
+    """Least-squares descent speed [m/s] over t_start <= t <= t_end."""
+    keep = (times >= t_start - 1e-9) & (times <= t_end + 1e-9)
+    return -float(np.polyfit(times[keep], heights[keep], 1)[0])
+
+
+def check_hindered(phi, t_end, t_start=1.0, **setup):
+    sim = hindered_suspension(phi, **setup)
+    record = run_hindered(sim, t_end)
+    u_stokes = sim.terminal_velocity(float(sim.store.diameter[0]))
+    u_rz = u_stokes * (1.0 - phi) ** RICHARDSON_ZAKI
+    speed = front_speed(record, t_start)
+    n = sim.store.count
+    # every droplet is in the slag or counted settled (none lost through the periodic sides; positions are wrapped
+    # at the start of each DEM step, so within a step's travel of the box); the front stayed in the suspension
+    d = float(sim.store.diameter[0])
+    assert n + sim.counters.settled == record.count
+    assert np.all((sim.store.position[:n, :2] >= -d) & (sim.store.position[:n, :2] <= sim.grid.size[:2] + d))
+    assert record.front[-1] > 0.3 * record.front[0]
+    droplet_re = sim.density * u_rz * float(sim.store.diameter[0]) / sim.viscosity
+    return speed / u_rz, record, sim, droplet_re
+
+
+def check_cloud(n_a_over_r, start_viscous_times=5.0, end_viscous_times=8.0, **setup):
+    """Measure the centroid velocity between ``start`` and ``end`` viscous times R^2/nu after release (the periodic
+    box's slowest mode relaxes on L^2 / (4 pi^2 nu) = 1.6 R^2/nu for L = 8 R)."""
+    cloud = falling_cloud(n_a_over_r, **setup)
+    viscous_time = cloud.radius**2 * cloud.sim.density / cloud.sim.viscosity
+    initial = gyration_radius(cloud.sim.store.position[: cloud.count])
+    times, heights, follow = run_cloud(cloud, end_viscous_times * viscous_time)
+    speed = settling_speed(times, heights, start_viscous_times * viscous_time)
+    fallen = (heights[0] - heights[-1]) / cloud.radius
+    return cloud, speed, fallen, gyration_radius(follow.position) / initial
+
+
+def gyration_radius(positions):
+    """Root-mean-square distance of the droplets from their centroid [m]."""
+    return float(np.sqrt(((positions - positions.mean(axis=0)) ** 2).sum(axis=1).mean()))
