@@ -239,6 +239,17 @@ class Simulation:
             self._scratch = np.zeros(size)  # work array for every deposit; its chunks are zeroed by the kernel
         return self._scratch[:size].reshape(cp.thread_count(), m, nx + 1, ny + 1, nz + 1)
 
+    def _persistent(self, key, shape, zero=False):
+        """A work array kept between steps (arrays handed to the parallel kernels inside tuples are not released
+        by Numba 0.6x when they are fresh each call: measured, the process grew and every kernel slowed down)."""
+        work = self.__dict__.setdefault("_work", {})
+        array = work.get(key)
+        if array is None or array.shape != shape:
+            array = work[key] = np.zeros(shape)
+        elif zero:
+            array[...] = 0.0
+        return array
+
     def deposit_many(self, positions, values, components, outs, mode=cp.COMPUTE):
         """Add rows of ``values`` (m, cap), deposited with the coupling kernel, to the arrays ``outs`` (m arrays, of
         ``components``: 0-2 faces, 3 cells), one pass; ``mode``: with the stencil table (see
@@ -253,7 +264,7 @@ class Simulation:
         if wide.size:
             narrow = values.copy()
             narrow[:, wide] = 0.0
-        raws = [np.zeros(out.shape) for out in outs]
+        raws = [self._persistent(("raw", k), out.shape, zero=True) for k, out in enumerate(outs)]
         # trilinear weights are cheaper to recompute than to load from the stencil table (measured 2x)
         cp.deposit_many(positions, s.diameter, narrow, n, components, tuple(raws), *self._grid_args(),
                         *self.kernel, self._scratch_for(m), *cp.NO_TABLE, cp.COMPUTE, True)
@@ -273,7 +284,8 @@ class Simulation:
             cp.interpolate_many(positions, s.diameter, n, components, tuple(fields), out, own, *self._grid_args(),
                                 *self.kernel, *self.table, mode)
             return out
-        filtered = tuple(self.filtered.filter(f, c) for f, c in zip(fields, components))
+        filtered = tuple(self.filtered.filter(f, c, out=self._persistent(("filtered", k), f.shape))
+                         for k, (f, c) in enumerate(zip(fields, components)))
         cp.interpolate_many(positions, s.diameter, n, components, filtered, out, cp.NO_OWN, *self._grid_args(),
                             *self.kernel, *cp.NO_TABLE, cp.COMPUTE, True)
         if own.shape[0]:

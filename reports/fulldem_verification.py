@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -63,6 +65,7 @@ def cloud_row(n_a_over_r, label, **setup):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="only the two default-tier test cases")
+    parser.add_argument("--only", type=int, default=None, help="run only case number ONLY (0-based) and print its row")
     parser.add_argument("--out", type=Path, default=ROOT / "reports" / "fulldem_verification.md")
     args = parser.parse_args(argv)
     small = "36 x 36 x 72 mm"
@@ -76,9 +79,17 @@ def main(argv=None):
         cases += [(cloud_row, (4.0, "R = 6 cells, box 8 R"), dict(cells_per_radius=6, cell=20e-3 / 6,
                                                                  diameter=1e-3)),
                   (cloud_row, (4.0, "R = 4 cells, box 12 R"), dict(box_radii=12))]
+    if args.only is not None:  # one case, in this process (the others run each in a fresh process)
+        function, positional, keywords = cases[args.only]
+        print(function(*positional, **keywords)[0], flush=True)
+        return
     rows = []
-    for function, positional, keywords in cases:
-        row, ratio = function(*positional, **keywords)
+    for index in range(len(cases)):
+        result = subprocess.run([sys.executable, __file__, "--only", str(index)] + (["--quick"] if args.quick else []),
+                                capture_output=True, text=True)
+        if result.returncode != 0:
+            raise RuntimeError(f"case {index} failed:\n{result.stderr[-3000:]}")
+        row = result.stdout.strip().splitlines()[-1]
         print(row, flush=True)
         rows.append(row)
     text = ("# fulldem: collective-settling verification, measured\n\n"

@@ -159,8 +159,9 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "sigma_cells": Field(F, "-", "Smoothing-kernel width in cells (lower bound of sigma).", 0.0,
                              exclusive_minimum=True),
         "sigma_diameter": Field(F, "-", "Smoothing-kernel width in droplet diameters (sigma grows with size).", 0.0),
-        "kernel": Field(S, "", "Coupling kernel: 'filtered' (trilinear weights, then a Gaussian filter on the grid; "
-                        "fast) or 'direct' (a Gaussian stencil per droplet); same width and variance.",
+        "kernel": Field(S, "", "Coupling kernel: 'direct' (a Gaussian stencil per droplet) or 'filtered' "
+                        "(trilinear weights, then a Gaussian filter on the grid; same width and variance; 2.5x "
+                        "faster per step at 130 000 droplets, but long runs slow down: known issue).",
                         choices=("filtered", "direct")),
         "hindrance": Field(S, "", "Void-fraction correction of the drag.", choices=("di_felice", "none")),
         "self_correction": Field(B, "", "Remove the droplet's own disturbance from the interpolated velocity."),
