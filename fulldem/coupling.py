@@ -730,13 +730,7 @@ def discrete_mobility_factor(sigma_cells_ratio: float, cut: float = DEFAULT_CUT,
     shape = (n, n, n)
     periodic = np.array([True, True, True])
     lower = np.zeros(3)
-    k = 2.0 * np.pi * sfft.fftfreq(n, d=h)
-    g2 = (2.0 * np.sin(k * h / 2.0) / h) ** 2
-    gx2, gy2, gz2 = np.meshgrid(g2, g2, g2, indexing="ij")
-    gsum = gx2 + gy2 + gz2
-    gsum[0, 0, 0] = 1.0
-    transfer = (1.0 - gz2 / gsum) / (mu * gsum)
-    transfer[0, 0, 0] = 0.0  # no mean flow: the periodic box's uniform counter-force
+    transfer = _stokes_transfer(n, h, mu)
     rng = np.random.default_rng(12345)
     sigma = sigma_cells_ratio * h
     values = []

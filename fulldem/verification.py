@@ -301,3 +301,16 @@ def check_cloud(n_a_over_r, start_viscous_times=5.0, end_viscous_times=8.0, **se
 def gyration_radius(positions):
     """Root-mean-square distance of the droplets from their centroid [m]."""
     return float(np.sqrt(((positions - positions.mean(axis=0)) ** 2).sum(axis=1).mean()))
+
+
+def check_homogeneous(phi, t_start=0.5, t_end=1.5, **setup):
+    """Run :func:`homogeneous_suspension` to ``t_end`` [s]; returns (the Simulation, the Richardson-Zaki velocity
+    [m/s], the batch settling speeds [m/s] of :func:`batch_settling_speed` after every step past ``t_start``)."""
+    sim = homogeneous_suspension(phi, **setup)
+    u_rz = sim.terminal_velocity(float(sim.store.diameter[0])) * (1.0 - phi) ** RICHARDSON_ZAKI
+    speeds = []
+    while sim.time < t_end - 1e-9:
+        sim.step()
+        if sim.time > t_start:
+            speeds.append(batch_settling_speed(sim))
+    return sim, u_rz, np.array(speeds)

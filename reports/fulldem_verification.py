@@ -20,8 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fulldem.verification import (RICHARDSON_ZAKI, batch_settling_speed, check_cloud, check_hindered,
-                                  homogeneous_suspension)
+from fulldem.verification import RICHARDSON_ZAKI, check_cloud, check_hindered, check_homogeneous
 from settler.output import atomic_write_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,13 +38,7 @@ def hindered_row(phi, t_end, label, **setup):
 
 def homogeneous_row(phi):
     clock = time.time()
-    sim = homogeneous_suspension(phi)
-    u_rz = sim.terminal_velocity(float(sim.store.diameter[0])) * (1.0 - phi) ** RICHARDSON_ZAKI
-    speeds = []
-    while sim.time < 1.5 - 1e-9:
-        sim.step()
-        if sim.time > 0.5:
-            speeds.append(batch_settling_speed(sim))
+    sim, u_rz, speeds = check_homogeneous(phi)
     ratio = float(np.mean(speeds)) / u_rz
     return (f"hindered, homogeneous | periodic 48 mm cube, phi = {phi}, {sim.store.count} droplets, t = 0.5-1.5 s | "
             f"{np.mean(speeds) * 1e3:.3f} mm/s | U_RZ = {u_rz * 1e3:.3f} mm/s | **{ratio:.3f}** | "

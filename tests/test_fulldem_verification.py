@@ -21,8 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fulldem.verification import (RICHARDSON_ZAKI, batch_settling_speed, check_cloud, check_hindered,
-                                  homogeneous_suspension)
+from fulldem.verification import check_cloud, check_hindered, check_homogeneous
 
 
 # ---------------------------------------------------------------------------------------------------- hindered settling
@@ -67,13 +66,7 @@ def test_homogeneous_suspension_richardson_zaki(phi):
     correlation hole (structure factor S(k) < 1 at the kernel's scales) slows each droplet's neighbourhood by
     3.5, 6.7, 13 % of U_RZ for sigma = 3 d (Percus-Yevick estimate; halved at sigma = 6 d, measured 0.94 at phi =
     0.2 with fulldem.sigma_cells = 2)."""
-    sim = homogeneous_suspension(phi)
-    u_rz = sim.terminal_velocity(float(sim.store.diameter[0])) * (1.0 - phi) ** RICHARDSON_ZAKI
-    speeds = []
-    while sim.time < 1.5 - 1e-9:
-        sim.step()
-        if sim.time > 0.5:
-            speeds.append(batch_settling_speed(sim))
+    sim, u_rz, speeds = check_homogeneous(phi)
     assert np.mean(speeds) / u_rz == pytest.approx(1.0, rel=0.15)
     assert np.std(speeds) < 0.02 * u_rz  # steady
 
