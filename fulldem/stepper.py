@@ -240,8 +240,7 @@ class Simulation:
         return self._scratch[:size].reshape(cp.thread_count(), m, nx + 1, ny + 1, nz + 1)
 
     def _persistent(self, key, shape, zero=False):
-        """A work array kept between steps (arrays handed to the parallel kernels inside tuples are not released
-        by Numba 0.6x when they are fresh each call: measured, the process grew and every kernel slowed down)."""
+        """A work array of the filtered kernel kept between steps, zeroed on request."""
         work = self.__dict__.setdefault("_work", {})
         array = work.get(key)
         if array is None or array.shape != shape:
