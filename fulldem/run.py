@@ -24,6 +24,7 @@ import math
 import time as _time
 from pathlib import Path
 
+import numba
 import numpy as np
 import pandas as pd
 
@@ -38,6 +39,14 @@ from .stepper import Counters, Simulation
 
 class RunError(RuntimeError):
     """A run that cannot start or continue; the message says why."""
+
+
+def _threading_layer():
+    """Numba's threading layer in use, or "not started" before the first parallel kernel ran."""
+    try:
+        return numba.threading_layer()
+    except ValueError:
+        return "not started"
 
 
 def read_droplet_list(path, default_density):
@@ -167,7 +176,9 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
             "neither (coalescence.enabled / reaction.enabled are ignored)")
     startup = {"grid_shape": list(sim.grid.shape), "cell_size": sim.grid.spacing, "fluid_step": sim.dt,
                "dem_step": sim.h, "dem_substeps": sim.substeps, "contact_stiffness_ref": sim.stiffness_ref,
-               "slag_viscosity": sim.viscosity, "submodels_missing": ["coalescence", "reaction"]}
+               "slag_viscosity": sim.viscosity, "submodels_missing": ["coalescence", "reaction"],
+               "numba_threads": numba.get_num_threads(), "numba_threading_layer": _threading_layer(),
+               "coupling_kernel": case.fulldem.kernel}
     write_run_metadata(out, case, "fulldem", **startup)
     log(f"fulldem: grid {sim.grid.shape} of {sim.grid.spacing * 1e3:g} mm, fluid step {sim.dt:g} s, "
         f"DEM step {sim.h:.3g} s ({sim.substeps} per fluid step), contact stiffness {sim.stiffness_ref:.3g} N/m")

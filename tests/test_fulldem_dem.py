@@ -592,3 +592,26 @@ def test_dense_settling_pile_overlap_stays_below_two_percent():
     assert np.abs(store.velocity[:n]).max() < 3e-4  # ... whose droplets move at under half the settling speed
     assert 0.005 < worst["real"] < 0.02
     assert worst["approach"] < 0.02
+
+
+# ------------------------------------------------------------------------------------------------ threading layer
+def test_fulldem_prefers_openmp_over_tbb_threading_layer():
+    """Importing fulldem makes numba launch OpenMP (or workqueue) threads, not TBB, whose launch cost grows over a
+    long run (see the docstring of :mod:`fulldem`); an explicit environment setting is left alone."""
+    import os
+    import subprocess
+    import sys
+
+    script = ("import numpy as np, numba, fulldem\n"
+              "@numba.njit(parallel=True)\n"
+              "def fill(a):\n"
+              "    for i in numba.prange(a.size):\n"
+              "        a[i] = i\n"
+              "fill(np.zeros(8))\n"
+              "print(numba.threading_layer())\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_THREADING_LAYER")}
+    layer = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    assert layer.stdout.strip() in ("omp", "workqueue")
+    env["NUMBA_THREADING_LAYER"] = "workqueue"
+    layer = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    assert layer.stdout.strip() == "workqueue"
