@@ -11,7 +11,7 @@ since the feed adds about as many droplets as settle and the count holds.
 The machine is shared and noisy: compare ratios within one run, not absolute times across runs; the minimum and
 median fluid-step times and the 1-minute load average are printed for that reason.
 
-    python benchmarks/bench_coupled.py                 # 10 000 and 130 000 droplets
+    python benchmarks/bench_coupled.py                 # 10 000 and 130 000 droplets, both coupling kernels
     python benchmarks/bench_coupled.py --n 20000 --steps 10 --case-override fulldem.contact_steps=20
 """
 
@@ -95,16 +95,18 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--n", type=int, nargs="*", default=[10_000, 130_000], help="droplet counts")
     parser.add_argument("--steps", type=int, default=10, help="timed fluid steps per size")
+    parser.add_argument("--kernels", nargs="*", default=["filtered", "direct"], choices=["filtered", "direct"],
+                        help="coupling kernels to time, each at every size, in this run (fulldem.kernel)")
     parser.add_argument("--case-override", nargs="*", default=[], metavar="section.key=value",
                         help="overrides of the simple case (e.g. fulldem.contact_steps=20)")
     args = parser.parse_args()
     print(f"coupled CFD-DEM benchmark on {platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}; shared machine: compare ratios within this run")
-    print(f"{'droplets':>9} {'substeps':>8} {'DEM step':>9} {'ms/fluid step':>13} {'(min, median)':>15} "
+    print(f"{'kernel':>8} {'droplets':>9} {'substeps':>8} {'DEM step':>9} {'ms/fluid step':>13} {'(min, median)':>15} "
           f"{'particle-steps/s':>17} {'wall s / sim s':>14} {'max overlap':>11} {'peak RSS':>9} {'load':>5}")
-    for n in args.n:
-        r = bench(n, args.steps, args.case_override)
-        print(f"{r['remaining']:>9d} {r['substeps']:>8d} {r['dem_step']:>9.3g} {r['ms_per_fluid_step']:>13.1f} "
+    for n, kernel in [(n, k) for n in args.n for k in args.kernels]:
+        r = bench(n, args.steps, [f"fulldem.kernel={kernel}", *args.case_override])
+        print(f"{kernel:>8} {r['remaining']:>9d} {r['substeps']:>8d} {r['dem_step']:>9.3g} {r['ms_per_fluid_step']:>13.1f} "
               f"{'(%.0f, %.0f)' % (r['ms_min'], r['ms_median']):>15} {r['throughput']:>17.3g} "
               f"{r['wall_per_sim_second']:>14.1f} {r['overlap']:>11.3g} {r['rss_gib']:>7.2f} GiB {r['load']:>5.2f}",
               flush=True)

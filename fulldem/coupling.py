@@ -347,6 +347,121 @@ def interpolate_many(position, diameter, count, components, fields, out, own, sp
 
 
 @njit(cache=True)
+def _cic_pair(x, lower, spacing, n_cells, staggered, wall_normal, periodic):
+    """:func:`cic_weights_1d` as always two nodes (i0, i1, w0, w1): where it gives one node, i1 = i0 and w1 = 0."""
+    offset = 0.0 if staggered else 0.5
+    s = (x - lower) / spacing - offset
+    first = int(math.floor(s))
+    f = s - first
+    if periodic:
+        i0 = first % n_cells
+        i1 = i0 + 1
+        if i1 == n_cells:
+            i1 = 0
+        return i0, i1, 1.0 - f, f
+    high = n_cells if staggered else n_cells - 1
+    low = 0
+    if wall_normal:
+        low, high = 1, high - 1
+    if first < low:
+        return low, low, 1.0, 0.0
+    if first >= high:
+        return high, high, 1.0, 0.0
+    return first, first + 1, 1.0 - f, f
+
+
+@njit(cache=True)
+def _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights):
+    """Trilinear nodes of droplet p: nodes[st, axis, 0:2], weights[st, axis, 0:2] with st = 0 at cell centres and
+    st = 1 at the faces normal to that axis (as in :func:`cic_stencils`, always two nodes)."""
+    for axis in range(3):
+        for st in range(2):
+            i0, i1, w0, w1 = _cic_pair(position[p, axis], lower[axis], spacing, shape[axis], st == 1,
+                                       st == 1 and not periodic[axis], periodic[axis])
+            nodes[st, axis, 0] = i0
+            nodes[st, axis, 1] = i1
+            weights[st, axis, 0] = w0
+            weights[st, axis, 1] = w1
+
+
+@njit(cache=True, parallel=True)
+def cic_deposit_many(position, values, count, components, out, spacing, lower, shape, periodic, scratch):
+    """:func:`deposit_many` with trilinear weights (``cic=True``), written for them: two nodes per axis, fixed
+    loops; the first step of :class:`FilteredKernel`. Same arguments, less the Gaussian's and the table's."""
+    n_chunks = scratch.shape[0]
+    m = components.shape[0]
+    for chunk in prange(n_chunks):
+        nodes = np.empty((2, 3, 2), dtype=np.int64)
+        weights = np.empty((2, 3, 2))
+        buf = scratch[chunk]
+        for k in range(m):
+            o = out[k]
+            for i in range(o.shape[0]):
+                for j in range(o.shape[1]):
+                    for l in range(o.shape[2]):
+                        buf[k, i, j, l] = 0.0
+        for p in range(chunk * count // n_chunks, (chunk + 1) * count // n_chunks):
+            _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights)
+            for k in range(m):
+                v = values[k, p]
+                if v == 0.0:
+                    continue
+                c = components[k]
+                sx = 1 if c == 0 else 0
+                sy = 1 if c == 1 else 0
+                sz = 1 if c == 2 else 0
+                l0, l1 = nodes[sz, 2, 0], nodes[sz, 2, 1]
+                wl0, wl1 = weights[sz, 2, 0], weights[sz, 2, 1]
+                for a in range(2):
+                    ia = nodes[sx, 0, a]
+                    wa = weights[sx, 0, a] * v
+                    for b in range(2):
+                        ib = nodes[sy, 1, b]
+                        wab = wa * weights[sy, 1, b]
+                        buf[k, ia, ib, l0] += wab * wl0
+                        buf[k, ia, ib, l1] += wab * wl1
+    for k in range(m):
+        o = out[k]
+        nj, nl = o.shape[1], o.shape[2]
+        for i in prange(o.shape[0]):
+            for j in range(nj):
+                for l in range(nl):
+                    acc = 0.0
+                    for chunk in range(n_chunks):
+                        acc += scratch[chunk, k, i, j, l]
+                    o[i, j, l] += acc
+
+
+@njit(cache=True, parallel=True)
+def cic_interpolate_many(position, count, components, fields, out, spacing, lower, shape, periodic):
+    """:func:`interpolate_many` with trilinear weights (``cic=True``, no self weight), written for them; the adjoint
+    of :func:`cic_deposit_many` (the same weights: a node counted twice at a wall has weight 0 the second time)."""
+    m = components.shape[0]
+    n_chunks = min(count, CHUNKS)
+    for chunk in prange(n_chunks):
+        nodes = np.empty((2, 3, 2), dtype=np.int64)
+        weights = np.empty((2, 3, 2))
+        for p in range(chunk * count // n_chunks, (chunk + 1) * count // n_chunks):
+            _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights)
+            for k in range(m):
+                field = fields[k]
+                c = components[k]
+                sx = 1 if c == 0 else 0
+                sy = 1 if c == 1 else 0
+                sz = 1 if c == 2 else 0
+                l0, l1 = nodes[sz, 2, 0], nodes[sz, 2, 1]
+                wl0, wl1 = weights[sz, 2, 0], weights[sz, 2, 1]
+                acc = 0.0
+                for a in range(2):
+                    ia = nodes[sx, 0, a]
+                    wa = weights[sx, 0, a]
+                    for b in range(2):
+                        ib = nodes[sy, 1, b]
+                        acc += wa * weights[sy, 1, b] * (wl0 * field[ia, ib, l0] + wl1 * field[ia, ib, l1])
+                out[k, p] = acc
+
+
+@njit(cache=True)
 def _sum_of_squares(wts, counts, component):
     acc = 1.0
     for axis in range(3):

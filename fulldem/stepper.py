@@ -265,8 +265,7 @@ class Simulation:
             narrow[:, wide] = 0.0
         raws = [self._persistent(("raw", k), out.shape, zero=True) for k, out in enumerate(outs)]
         # trilinear weights are cheaper to recompute than to load from the stencil table (measured 2x)
-        cp.deposit_many(positions, s.diameter, narrow, n, components, tuple(raws), *self._grid_args(),
-                        *self.kernel, self._scratch_for(m), *cp.NO_TABLE, cp.COMPUTE, True)
+        cp.cic_deposit_many(positions, narrow, n, components, tuple(raws), *self._grid_args(), self._scratch_for(m))
         for raw, out, c in zip(raws, outs, components):
             out += self.filtered.filter(raw, c)
         if wide.size:
@@ -285,8 +284,7 @@ class Simulation:
             return out
         filtered = tuple(self.filtered.filter(f, c, out=self._persistent(("filtered", k), f.shape))
                          for k, (f, c) in enumerate(zip(fields, components)))
-        cp.interpolate_many(positions, s.diameter, n, components, filtered, out, cp.NO_OWN, *self._grid_args(),
-                            *self.kernel, *cp.NO_TABLE, cp.COMPUTE, True)
+        cp.cic_interpolate_many(positions, n, components, filtered, out, *self._grid_args())
         if own.shape[0]:
             self.filtered.self_weight(positions, n, self.grid.spacing, self.lower, own)
         wide = self._wide()
