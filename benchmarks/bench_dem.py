@@ -318,7 +318,7 @@ def main(argv=None):
 
     print(f"DEM-only benchmark: {args.steps} steps of {STEP} s, k_n = {STIFFNESS} N/m, gamma_n = {DAMPING_RATE} 1/s, "
           f"skin {SKIN * 1e3:.3f} mm; ours: Numba {numba.__version__}, {numba.get_num_threads()} threads "
-          f"({numba.config.THREADING_LAYER} layer), drag {args.drag}, "
+          f"(threading layer: {numba.config.THREADING_LAYER_PRIORITY[0]} first), drag {args.drag}, "
           f"{'half' if args.half_list else 'full'} list, drag impulse {'tracked' if args.impulse else 'not tracked'}")
     print(f"load average at start: {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs (shared machine: compare the "
           "ratio within this run, not absolute figures across runs)")

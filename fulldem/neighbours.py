@@ -430,11 +430,13 @@ class NeighbourList:
         self.reference_diameter[:count] = diameter[:count]
 
     def needs_rebuild(self, position, diameter, count) -> bool:
-        """True when the droplet count changed or some droplet travelled (or grew) more than skin/2 since the build."""
+        """True when the droplet count changed or some droplet travelled (or grew) more than skin/2 since the build.
+        A check that measured keeps the largest travel (plus growth) in ``last_travel`` [m]."""
         if count != self.count or self.builds == 0:
             return True
         travel = max_travel(position, self.reference_position, diameter, self.reference_diameter, count,
                             self.period, self.inverse_period)
+        self.last_travel = travel
         return travel > 0.5 * self.skin
 
     def invalidate(self) -> None:

@@ -54,25 +54,13 @@ SORT_INTERVAL = 50
 
 
 class CoupledDem(DemStepper):
-    """DEM stepper that also records ``worst_overlap``, the largest overlap ratio over every step of an
-    :meth:`advance` (the base class keeps the last step's); the caller zeroes it before the sub-steps.
+    """The DEM stepper of the coupled step.
 
     The coupling's per-droplet external force F (buoyant weight and pressure force, held over a fluid step) enters
     through the fluid velocity: dv/dt = (F + contacts)/m + (u - v)/tau is the same as contacts/m + (u + F/beta - v)/tau,
     so the DEM sees u + F/beta, and its drag impulse then includes F h per step, which the coupling subtracts. This
     keeps the contact-force computation free of extra terms, so whole sub-steps run as one fused pass.
     """
-
-    worst_overlap = 0.0
-
-    def _step_fused(self, fluid_velocity, impulse, nchunk):
-        super()._step_fused(fluid_velocity, impulse, nchunk)
-        self.worst_overlap = max(self.worst_overlap, self.max_overlap_ratio)
-
-    def compute_forces_tracked(self) -> float:
-        worst = self.compute_forces()
-        self.worst_overlap = max(self.worst_overlap, worst)
-        return worst
 
 
 @dataclass
@@ -437,10 +425,9 @@ class Simulation:
         self.impulse[:n] = 0.0
         self.drift_velocity[:n] = self.fluid_velocity[:n] + self.external[:n] / self.beta[:n, None]
         self.dem.set_drag(self.beta)
-        self.dem.worst_overlap = 0.0
-        self.dem.compute_forces_tracked()
+        at_start = self.dem.compute_forces()
         self.dem.advance(self.substeps, self.drift_velocity, self.impulse)
-        worst = max(self.dem.worst_overlap, self.dem.max_overlap_ratio)
+        worst = max(at_start, self.dem.peak_overlap_ratio)
         self.impulse[:n] -= self.external[:n] * (self.substeps * self.h)
 
         # the fluid is owed -J, deposited where the droplets felt the fluid

@@ -362,7 +362,7 @@ def test_integrator_kernels_match_numpy_twin(uniform_fluid):
 
 @pytest.mark.parametrize("half_list", [True, False])
 def test_advance_equals_repeated_steps_with_resorting(half_list):
-    runs = []
+    runs, peaks = [], []
     for fused in (False, True):
         store, _, _ = _cluster(np.random.default_rng(12), n=50)
         store.velocity[:50] *= 300.0  # fast enough to trigger rebuilds (and re-sorting) within the run
@@ -375,14 +375,20 @@ def test_advance_equals_repeated_steps_with_resorting(half_list):
         impulse = np.zeros((50, 3))
         if fused:
             stepper.advance(40, fluid, impulse)
+            peak = stepper.peak_overlap_ratio
         else:
+            peak = 0.0
             for _ in range(40):
                 stepper.step(fluid, impulse)
+                peak = max(peak, stepper.max_overlap_ratio)
         assert stepper.neighbours.builds > 1
         runs.append((store.ident[:50].copy(), store.position[:50].copy(), store.velocity[:50].copy(), impulse))
+        peaks.append(peak)
     order = np.argsort(runs[0][0]), np.argsort(runs[1][0])
     for a in range(1, 4):
         np.testing.assert_allclose(runs[1][a][order[1]], runs[0][a][order[0]], rtol=1e-12, atol=1e-20)
+    # the largest overlap over the advance's steps, not only the last step's
+    assert peaks[0] > 0.0 and peaks[1] == pytest.approx(peaks[0], rel=1e-9)
 
 
 def test_results_do_not_depend_on_the_thread_count():
