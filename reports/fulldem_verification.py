@@ -21,9 +21,12 @@ from pathlib import Path
 import numpy as np
 
 from fulldem.verification import RICHARDSON_ZAKI, check_cloud, check_hindered, check_homogeneous
+from settler.cases import load_case
 from settler.output import atomic_write_text
 
 ROOT = Path(__file__).resolve().parents[1]
+#: Heading of the hand-written part of the report, kept when the table is rewritten.
+DISCUSSION = "## Discussion"
 
 
 def hindered_row(phi, t_end, label, **setup):
@@ -85,13 +88,17 @@ def main(argv=None):
         row = result.stdout.strip().splitlines()[-1]
         print(row, flush=True)
         rows.append(row)
+    # the hand-written discussion after DISCUSSION in an existing report is kept (re-read it against the new table)
+    previous = args.out.read_text() if args.out.exists() else ""
+    discussion = previous[previous.index(DISCUSSION):] if DISCUSSION in previous else ""
     text = ("# fulldem: collective-settling verification, measured\n\n"
             f"Written by `python {Path(__file__).relative_to(ROOT)}{' --quick' if args.quick else ''}` on "
             f"{time.strftime('%Y-%m-%d')}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-            f"load average at the end {os.getloadavg()[0]:.1f}. Set-ups: `fulldem/verification.py`; tests: "
+            f"load average at the end {os.getloadavg()[0]:.1f}; coupling kernel "
+            f"`{load_case('simple').fulldem.kernel}` (the default). Set-ups: `fulldem/verification.py`; tests: "
             "`tests/test_fulldem_verification.py` (tolerances: 15 % hindered settling, 25 % falling cloud).\n\n"
             "| check | case | measured | reference | ratio | wall |\n|---|---|---|---|---|---|\n"
-            + "\n".join(f"| {row} |" for row in rows) + "\n")
+            + "\n".join(f"| {row} |" for row in rows) + "\n" + ("\n" + discussion if discussion else ""))
     atomic_write_text(args.out, text)
     print(f"wrote {args.out}")
 
