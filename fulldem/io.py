@@ -127,7 +127,10 @@ def _json_default(obj):
 
 
 class Progress:
-    """A one-line progress report on stderr: simulated time, droplets, wall time and ETA."""
+    """A one-line progress report on stderr: simulated time, droplets, wall time and ETA.
+
+    The ETA extrapolates the pace since the first report, not since the start: the first step of a run includes
+    the compilation of the Numba kernels (up to a minute on a first run), which would otherwise inflate it."""
 
     def __init__(self, t_start, t_end, enabled=True, interval=1.0, stream=None):
         self.t_start, self.t_end = t_start, t_end
@@ -136,6 +139,7 @@ class Progress:
         self.stream = stream or sys.stderr
         self.wall_start = _time.perf_counter()
         self.last = -1e30
+        self.first = None  # (simulated time, wall clock) of the first report
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
 
     def update(self, t, droplets, extra="", force=False):
@@ -145,7 +149,10 @@ class Progress:
         self.last = now
         wall = now - self.wall_start
         done = (t - self.t_start) / max(self.t_end - self.t_start, 1e-300)
-        eta = wall * (1.0 - done) / done if done > 0 else float("nan")
+        if self.first is None:
+            self.first = (t, now)
+        first_t, first_wall = self.first
+        eta = (now - first_wall) * (self.t_end - t) / (t - first_t) if t > first_t else float("nan")
         line = (f"t = {t:8.3f} / {self.t_end:g} s ({100 * done:5.1f} %)  droplets {droplets:8d}  "
                 f"wall {wall:7.1f} s  ETA {eta:7.1f} s  {extra}")
         if self.tty:

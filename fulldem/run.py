@@ -196,6 +196,8 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
         if fd.snapshot_interval > 0:
             snaps.write(sim.time, sim.store, sim.fluid, np.ones(sim.grid.shape))
     good = checkpoint_state(sim)
+    if progress:
+        log("fulldem: the first step compiles the Numba kernels where no cache exists yet (up to a minute)")
     bar = Progress(sim.time, t_end, enabled=progress)
     last_checkpoint = _time.perf_counter()
     try:

@@ -75,3 +75,22 @@ def test_blow_up_stops_with_last_good_state(tmp_path):
         run_case(case, tmp_path, end_time=0.1, droplets=csv, feed=False, progress=False, log=lambda *a: None)
     assert (tmp_path / "last_good.npz").exists()
     assert read_time_series(tmp_path / "timeseries.csv")["time"].iloc[0] == 0.0
+
+
+def test_progress_eta_extrapolates_from_the_first_report(monkeypatch):
+    """The ETA uses the pace after the first report (whose step includes compilation): 1 s of simulated time in
+    the first 30 s of wall (compiling), then 1 s per 2 s of wall, 10 s to go: ETA 20 s, not 10 x 32/2 s."""
+    import io
+    import types
+
+    import fulldem.io as fio
+
+    clock = iter([0.0, 30.0, 32.0])
+    monkeypatch.setattr(fio, "_time", types.SimpleNamespace(perf_counter=lambda: next(clock)))
+    stream = io.StringIO()
+    bar = fio.Progress(0.0, 12.0, stream=stream)
+    bar.update(1.0, 10, force=True)
+    bar.update(2.0, 10, force=True)
+    first, second = stream.getvalue().splitlines()
+    assert "ETA     nan s" in first
+    assert "ETA    20.0 s" in second
