@@ -183,6 +183,7 @@ class Simulation:
         self.eps_old = None
         self.owed_force = self.grid.zeros_faces()  # -J deposited, applied in the next fluid step [N/m^3]
         self.last = StepDiagnostics()
+        self._dem_stale = False  # droplets were added or removed since the DEM last saw them
         self._alloc(self.store.capacity)
 
     # ------------------------------------------------------------------------------------------------ helpers
@@ -346,7 +347,7 @@ class Simulation:
         self.counters.mass_fed += float(np.sum(rho * math.pi / 6.0 * d**3))
         self.counters.fed += len(d)
         self._ensure_capacity()
-        self.dem.droplets_changed()
+        self._dem_stale = True  # the DEM's list and arrays are rebuilt once, at the start of the next DEM pass
         return len(d)
 
     def remove_exits(self):
@@ -367,7 +368,7 @@ class Simulation:
         self.counters.settled += int((code == 1).sum())
         self.counters.lost += int((code == 2).sum())
         s.remove(code > 0)
-        self.dem.droplets_changed()
+        self._dem_stale = True
 
     # ------------------------------------------------------------------------------------------------ the step
     def step(self):
@@ -379,7 +380,10 @@ class Simulation:
         self._ensure_capacity()
         if s.count and self.steps % SORT_INTERVAL == 0:
             reorder_store(s, self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
+            self._dem_stale = True
+        if self._dem_stale:  # one list build per step for this step's insertions, the last one's exits and a sort
             self.dem.droplets_changed()
+            self._dem_stale = False
         n = s.count
         self.start_position[:n] = s.position[:n]
 
