@@ -5,8 +5,9 @@ with N droplets of the feed distribution placed without overlap in the cylinder 
 region where the paper's droplets are), the feed switched off so N stays fixed, and the case's default fluid and
 DEM steps. Throughput = N x DEM sub-steps / wall time of the coupled loop (fluid step, coupling and DEM together;
 set-up, compilation and the first step excluded). Wall time per simulated second = loop time / simulated time:
-at N = 130 000 (the paper's steady count in the simple model) this is the steady-state cost of the simple case,
-since the feed adds about as many droplets as settle and the count holds.
+at N = 130 000 (the paper's steady count in the simple model) it stands in for the steady-state cost of the
+simple case. It is an optimistic stand-in: the droplets here are spread in the channel, while a fed run also
+carries a packed layer under the roof, which cost 2.7-3 times as much per droplet at t = 7 s (README).
 
 The machine is shared and noisy: compare ratios within one run, not absolute times across runs; the minimum and
 median fluid-step times and the 1-minute load average are printed for that reason.
