@@ -241,6 +241,29 @@ def droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sig
                     table_weights[p, st, axis, i] = wts[st, axis, i]
 
 
+@njit(cache=True)
+def _zero_slab(buf, out, m):
+    """Zero the part of one chunk's work slab ``buf`` (m, NX, NY, NZ) that the m arrays ``out`` cover."""
+    for k in range(m):
+        o = out[k]
+        for i in range(o.shape[0]):
+            for j in range(o.shape[1]):
+                for l in range(o.shape[2]):
+                    buf[k, i, j, l] = 0.0
+
+
+@njit(cache=True)
+def _add_slabs(scratch, k, i, o):
+    """o[i] += the chunks' partial deposits scratch[:, k, i] of array k (one x-plane; the parallel sum's last
+    step)."""
+    for j in range(o.shape[1]):
+        for l in range(o.shape[2]):
+            acc = 0.0
+            for chunk in range(scratch.shape[0]):
+                acc += scratch[chunk, k, i, j, l]
+            o[i, j, l] += acc
+
+
 @njit(cache=True, parallel=True)
 def deposit_many(position, diameter, values, count, components, out, spacing, lower, shape, periodic, sigma_cells,
                  sigma_diameter, cut, scratch, table_first, table_count, table_weights,
@@ -263,12 +286,7 @@ def deposit_many(position, diameter, values, count, components, out, spacing, lo
         wts = np.empty((2, 3, MAX_STENCIL))
         counts = np.empty((2, 3), dtype=np.int64)
         buf = scratch[chunk]
-        for k in range(m):
-            o = out[k]
-            for i in range(o.shape[0]):
-                for j in range(o.shape[1]):
-                    for l in range(o.shape[2]):
-                        buf[k, i, j, l] = 0.0
+        _zero_slab(buf, out, m)
         start = chunk * count // n_chunks
         stop = (chunk + 1) * count // n_chunks
         for p in range(start, stop):
@@ -294,14 +312,8 @@ def deposit_many(position, diameter, values, count, components, out, spacing, lo
                             row[idx[sz, 2, cc]] += wab * wts[sz, 2, cc]
     for k in range(m):
         o = out[k]
-        nj, nl = o.shape[1], o.shape[2]
         for i in prange(o.shape[0]):
-            for j in range(nj):
-                for l in range(nl):
-                    acc = 0.0
-                    for chunk in range(n_chunks):
-                        acc += scratch[chunk, k, i, j, l]
-                    o[i, j, l] += acc
+            _add_slabs(scratch, k, i, o)
 
 
 @njit(cache=True, parallel=True)
@@ -394,12 +406,7 @@ def cic_deposit_many(position, values, count, components, out, spacing, lower, s
         nodes = np.empty((2, 3, 2), dtype=np.int64)
         weights = np.empty((2, 3, 2))
         buf = scratch[chunk]
-        for k in range(m):
-            o = out[k]
-            for i in range(o.shape[0]):
-                for j in range(o.shape[1]):
-                    for l in range(o.shape[2]):
-                        buf[k, i, j, l] = 0.0
+        _zero_slab(buf, out, m)
         for p in range(chunk * count // n_chunks, (chunk + 1) * count // n_chunks):
             _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights)
             for k in range(m):
@@ -422,14 +429,8 @@ def cic_deposit_many(position, values, count, components, out, spacing, lower, s
                         buf[k, ia, ib, l1] += wab * wl1
     for k in range(m):
         o = out[k]
-        nj, nl = o.shape[1], o.shape[2]
         for i in prange(o.shape[0]):
-            for j in range(nj):
-                for l in range(nl):
-                    acc = 0.0
-                    for chunk in range(n_chunks):
-                        acc += scratch[chunk, k, i, j, l]
-                    o[i, j, l] += acc
+            _add_slabs(scratch, k, i, o)
 
 
 @njit(cache=True, parallel=True)
