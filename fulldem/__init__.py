@@ -9,6 +9,10 @@ and a coupled step (3 600 droplets) from 29 to 230 ms over 300 steps, while with
 7-14 ms (measured 2026-11-22, numba 0.68.1, 2 cores). An engine that launches tens of parallel regions per step
 therefore prefers OpenMP, then workqueue, then TBB. Setting ``NUMBA_THREADING_LAYER`` or
 ``NUMBA_THREADING_LAYER_PRIORITY`` in the environment overrides this choice.
+
+OpenMP's threads spin while they wait. Two processes on 2 cores then slow each other down about fivefold; give each
+``OMP_WAIT_POLICY=passive`` or ``NUMBA_NUM_THREADS=1`` (README, speed). A process alone runs 15-30 % faster spinning,
+so spinning is left on.
 """
 
 import os
