@@ -134,49 +134,6 @@ def stencils(position, sigma, spacing, lower, shape, periodic, cut, idx, wts, co
                                      periodic[axis], sigma, cut, idx[1, axis], wts[1, axis])
 
 
-@njit(cache=True)
-def cic_weights_1d(x, lower, spacing, n_cells, staggered, wall_normal, periodic, index_out, weight_out):
-    """Linear (cloud-in-cell) weights of the two nodes around coordinate x; returns the number of nodes written.
-
-    Nodes and arguments as in :func:`weights_1d`. On a walled axis a weight that would fall beyond the last valid
-    node (the mirror half-cell next to a wall, or a wall-normal boundary face) goes to that node, so the weights
-    always sum to one; the two nodes are consecutive (modulo the axis length on periodic axes).
-    """
-    offset = 0.0 if staggered else 0.5
-    s = (x - lower) / spacing - offset
-    first = int(math.floor(s))
-    f = s - first
-    if periodic:
-        index_out[0] = first % n_cells
-        index_out[1] = (first + 1) % n_cells
-        weight_out[0] = 1.0 - f
-        weight_out[1] = f
-        return 2
-    n_nodes = n_cells + 1 if staggered else n_cells
-    low, high = 0, n_nodes - 1
-    if wall_normal:
-        low, high = 1, n_nodes - 2
-    if first < low or first >= high:
-        index_out[0] = low if first < low else high
-        weight_out[0] = 1.0
-        return 1
-    index_out[0] = first
-    index_out[1] = first + 1
-    weight_out[0] = 1.0 - f
-    weight_out[1] = f
-    return 2
-
-
-@njit(cache=True)
-def cic_stencils(position, spacing, lower, shape, periodic, idx, wts, counts):
-    """:func:`stencils` with the linear weights of :func:`cic_weights_1d`."""
-    for axis in range(3):
-        counts[0, axis] = cic_weights_1d(position[axis], lower[axis], spacing, shape[axis], False, False,
-                                         periodic[axis], idx[0, axis], wts[0, axis])
-        counts[1, axis] = cic_weights_1d(position[axis], lower[axis], spacing, shape[axis], True,
-                                         not periodic[axis], periodic[axis], idx[1, axis], wts[1, axis])
-
-
 #: Stencil-table modes of :func:`deposit_many` / :func:`interpolate_many`: compute the weights (no table), compute
 #: and store them in the table, or load them from it. A fluid step's three passes are all at x^n: the first stores,
 #: the other two load (the weights are the same numbers, so adjointness stays exact).
@@ -199,8 +156,8 @@ NO_TABLE = stencil_table(0, 1)
 
 @njit(cache=True)
 def droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sigma_cells, sigma_diameter, cut, idx,
-                     wts, counts, table_first, table_count, table_weights, mode, cic=False):
-    """:func:`stencils` of droplet p (:func:`cic_stencils` if ``cic``), computed, computed and stored in row p of the
+                     wts, counts, table_first, table_count, table_weights, mode):
+    """:func:`stencils` of droplet p, computed, computed and stored in row p of the
     table, or loaded from it.
 
     The nodes of one set are consecutive (modulo the axis length on periodic axes), so a row keeps the first node.
@@ -219,11 +176,8 @@ def droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sig
                     idx[st, axis, i] = node
                     wts[st, axis, i] = table_weights[p, st, axis, i]
         return
-    if cic:
-        cic_stencils(position[p], spacing, lower, shape, periodic, idx, wts, counts)
-    else:
-        sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
-        stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+    sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
+    stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
     if mode == STORE:
         width = table_weights.shape[3]
         fits = True
@@ -267,7 +221,7 @@ def _add_slabs(scratch, k, i, o):
 @njit(cache=True, parallel=True)
 def deposit_many(position, diameter, values, count, components, out, spacing, lower, shape, periodic, sigma_cells,
                  sigma_diameter, cut, scratch, table_first, table_count, table_weights,
-                 mode, cic=False):
+                 mode):
     """Add sum_p values[k, p] * w_p(node) to ``out[k]`` for k = 0..m-1, one stencil computation per droplet.
 
     values: (m, cap) per-droplet amounts (e.g. volume / cell volume); components: (m,) int64, the array of each
@@ -275,8 +229,8 @@ def deposit_many(position, diameter, values, count, components, out, spacing, lo
     scratch: (n_chunks, m, NX, NY, NZ) work array with NX, NY, NZ >= every out[k]'s shape (NX = nx + 1 etc. fits
     all four), one slab per chunk of droplets so the parallel sum is race-free; its chunks are zeroed here.
     The weights are those of :func:`interpolate_many` (adjointness), normalised (conservation). table_*, mode:
-    see :func:`droplet_stencils` (:data:`NO_TABLE`, COMPUTE: none). cic: trilinear weights (the first step of
-    :class:`FilteredKernel`) instead of the Gaussian.
+    see :func:`droplet_stencils` (:data:`NO_TABLE`, COMPUTE: none). :func:`cic_deposit_many` is the trilinear
+    counterpart (the first step of :class:`FilteredKernel`).
     """
     n_chunks = scratch.shape[0]
     m = components.shape[0]
@@ -291,7 +245,7 @@ def deposit_many(position, diameter, values, count, components, out, spacing, lo
         stop = (chunk + 1) * count // n_chunks
         for p in range(start, stop):
             droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sigma_cells, sigma_diameter,
-                             cut, idx, wts, counts, table_first, table_count, table_weights, mode, cic)
+                             cut, idx, wts, counts, table_first, table_count, table_weights, mode)
             for k in range(m):
                 v = values[k, p]
                 if v == 0.0:
@@ -318,12 +272,13 @@ def deposit_many(position, diameter, values, count, components, out, spacing, lo
 
 @njit(cache=True, parallel=True)
 def interpolate_many(position, diameter, count, components, fields, out, own, spacing, lower, shape, periodic,
-                     sigma_cells, sigma_diameter, cut, table_first, table_count, table_weights, mode, cic=False):
+                     sigma_cells, sigma_diameter, cut, table_first, table_count, table_weights, mode):
     """out[k, p] = sum_nodes w_p(node) fields[k][node] for k = 0..m-1, one stencil computation per droplet.
 
     components: (m,) int64 (0..2 faces, 3 cells); fields: tuple of m arrays of those shapes; out: (m, cap).
     own: (cap,) or (0,): if not empty, also own[p] = sum_cells w_p(cell)^2 (see :func:`self_weight`).
-    table_*, mode: see :func:`droplet_stencils` (:data:`NO_TABLE`, COMPUTE: none). cic: trilinear weights.
+    table_*, mode: see :func:`droplet_stencils` (:data:`NO_TABLE`, COMPUTE: none); trilinear counterpart:
+    :func:`cic_interpolate_many`.
     """
     m = components.shape[0]
     n_chunks = min(count, CHUNKS)
@@ -336,7 +291,7 @@ def interpolate_many(position, diameter, count, components, fields, out, own, sp
         stop = (chunk + 1) * count // n_chunks
         for p in range(start, stop):
             droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sigma_cells, sigma_diameter,
-                             cut, idx, wts, counts, table_first, table_count, table_weights, mode, cic)
+                             cut, idx, wts, counts, table_first, table_count, table_weights, mode)
             for k in range(m):
                 field = fields[k]
                 c = components[k]
@@ -360,7 +315,13 @@ def interpolate_many(position, diameter, count, components, fields, out, own, sp
 
 @njit(cache=True)
 def _cic_pair(x, lower, spacing, n_cells, staggered, wall_normal, periodic):
-    """:func:`cic_weights_1d` as always two nodes (i0, i1, w0, w1): where it gives one node, i1 = i0 and w1 = 0."""
+    """Linear (cloud-in-cell) weights of the two nodes around coordinate x: (i0, i1, w0, w1), w0 + w1 = 1.
+
+    Nodes are cell centres (staggered = False) or faces (staggered = True) of an axis with n_cells cells;
+    wall_normal: the two boundary faces of the wall-normal velocity component are excluded; periodic: indices wrap.
+    On a walled axis a weight that would fall beyond the last valid node (the mirror half-cell next to a wall, or a
+    wall-normal boundary face) goes to that node: then i1 = i0 and w1 = 0, so the weights always sum to one.
+    """
     offset = 0.0 if staggered else 0.5
     s = (x - lower) / spacing - offset
     first = int(math.floor(s))
@@ -385,7 +346,7 @@ def _cic_pair(x, lower, spacing, n_cells, staggered, wall_normal, periodic):
 @njit(cache=True)
 def _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights):
     """Trilinear nodes of droplet p: nodes[st, axis, 0:2], weights[st, axis, 0:2] with st = 0 at cell centres and
-    st = 1 at the faces normal to that axis (as in :func:`cic_stencils`, always two nodes)."""
+    st = 1 at the faces normal to that axis (the layout of :func:`stencils`; always two nodes)."""
     for axis in range(3):
         for st in range(2):
             i0, i1, w0, w1 = _cic_pair(position[p, axis], lower[axis], spacing, shape[axis], st == 1,
@@ -398,8 +359,8 @@ def _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights):
 
 @njit(cache=True, parallel=True)
 def cic_deposit_many(position, values, count, components, out, spacing, lower, shape, periodic, scratch):
-    """:func:`deposit_many` with trilinear weights (``cic=True``), written for them: two nodes per axis, fixed
-    loops; the first step of :class:`FilteredKernel`. Same arguments, less the Gaussian's and the table's."""
+    """:func:`deposit_many` with trilinear weights (:func:`_cic_pair`): two nodes per axis, fixed loops; the first
+    step of :class:`FilteredKernel`. Same arguments, less the Gaussian's and the table's."""
     n_chunks = scratch.shape[0]
     m = components.shape[0]
     for chunk in prange(n_chunks):
@@ -435,7 +396,7 @@ def cic_deposit_many(position, values, count, components, out, spacing, lower, s
 
 @njit(cache=True, parallel=True)
 def cic_interpolate_many(position, count, components, fields, out, spacing, lower, shape, periodic):
-    """:func:`interpolate_many` with trilinear weights (``cic=True``, no self weight), written for them; the adjoint
+    """:func:`interpolate_many` with trilinear weights (:func:`_cic_pair`; no self weight); the adjoint
     of :func:`cic_deposit_many` (the same weights: a node counted twice at a wall has weight 0 the second time)."""
     m = components.shape[0]
     n_chunks = min(count, CHUNKS)
@@ -673,19 +634,13 @@ def filtered_self_weight(position, count, spacing, lower, periodic, gx, gy, gz, 
     droplet's own deposit seen back at itself. gx, gy, gz: G G of each axis's cell filter (dense)."""
     n_chunks = min(count, CHUNKS)
     for chunk in prange(n_chunks):
-        idx = np.empty(2, dtype=np.int64)
-        wts = np.empty(2)
         for p in range(chunk * count // n_chunks, (chunk + 1) * count // n_chunks):
             acc = 1.0
             for axis in range(3):
                 g2 = gx if axis == 0 else (gy if axis == 1 else gz)
-                k = cic_weights_1d(position[p, axis], lower[axis], spacing, g2.shape[0], False, False,
-                                   periodic[axis], idx, wts)
-                s2 = 0.0
-                for i in range(k):
-                    for j in range(k):
-                        s2 += wts[i] * wts[j] * g2[idx[i], idx[j]]
-                acc *= s2
+                i0, i1, w0, w1 = _cic_pair(position[p, axis], lower[axis], spacing, g2.shape[0], False, False,
+                                           periodic[axis])
+                acc *= w0 * w0 * g2[i0, i0] + 2.0 * w0 * w1 * g2[i0, i1] + w1 * w1 * g2[i1, i1]
             out[p] = acc
 
 
@@ -760,15 +715,13 @@ def filtered_mobility_factor(sigma_cells: float, cut: float = DEFAULT_CUT, n: in
     components = np.array([2], dtype=np.int64)
     for _ in range(samples):
         pos = np.array([[n / 2 + rng.uniform(0, 1), n / 2 + rng.uniform(0, 1), n / 2 + rng.uniform(0, 1)]])
-        diam = np.array([0.0])
         raw = np.zeros(shape)
-        deposit_many(pos, diam, np.ones((1, 1)), 1, components, (raw,), h, lower, np.array(shape), periodic, 1.0, 0.0,
-                     cut, np.zeros((1, 1, *shape)), *NO_TABLE, COMPUTE, True)
+        cic_deposit_many(pos, np.ones((1, 1)), 1, components, (raw,), h, lower, np.array(shape), periodic,
+                         np.zeros((1, 1, *shape)))
         force = kernel.filter(raw, 2)
         uz = kernel.filter(np.real(sfft.ifftn(sfft.fftn(force / h**3) * transfer)), 2)
         out = np.zeros((1, 1))
-        interpolate_many(pos, diam, 1, components, (uz,), out, NO_OWN, h, lower, np.array(shape), periodic, 1.0,
-                         0.0, cut, *NO_TABLE, COMPUTE, True)
+        cic_interpolate_many(pos, 1, components, (uz,), out, h, lower, np.array(shape), periodic)
         values.append(out[0, 0])
     unbounded = float(np.mean(values)) + HASIMOTO / (6.0 * math.pi * mu * n * h)
     return unbounded / gaussian_self_mobility(sigma_cells * h, mu)
