@@ -227,14 +227,10 @@ def _chunks(count):
 
 # ---------------------------------------------------------------------------------------------------- contact forces
 @njit(cache=True, inline="always")
-def _row_force(i, position, velocity, diameter, mass, flags, partner, start, index, stiffness_ref, diameter_ref,
-               damping, law, periodic_any, period, inverse_period, walls, wall_lower, wall_upper, outlet_side,
-               outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching):
-    """Force on droplet i from its row of a full list (and the walls): (fx, fy, fz, largest overlap ratio).
-
-    The row is first filtered into the entries of touching partners (``touching``: a work row, filled without a
-    branch per entry), then only their forces are computed, with the entries' dashpot coefficients ``damping``.
-    """
+def _touching_entries(i, position, diameter, flags, partner, start, index, periodic_any, period, inverse_period,
+                      touching):
+    """Write into ``touching`` the list entries k of row i whose partner overlaps droplet i (not its mutual
+    coalescence partner), without a branch per entry; returns how many."""
     xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
     di = diameter[i]
     skip = _mutual_partner(i, flags, partner)
@@ -245,6 +241,22 @@ def _row_force(i, position, velocity, diameter, mass, flags, partner, start, ind
         reach = 0.5 * (di + diameter[j])
         touching[found] = k
         found += (r2 < reach * reach) & (r2 > 0.0) & (j != skip)
+    return found
+
+
+@njit(cache=True, inline="always")
+def _row_force(i, position, velocity, diameter, mass, flags, partner, start, index, stiffness_ref, diameter_ref,
+               damping, law, periodic_any, period, inverse_period, walls, wall_lower, wall_upper, outlet_side,
+               outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching):
+    """Force on droplet i from its row of a full list (and the walls): (fx, fy, fz, largest overlap ratio).
+
+    The row is first filtered into the entries of touching partners (``touching``: a work row, filled without a
+    branch per entry), then only their forces are computed, with the entries' dashpot coefficients ``damping``.
+    """
+    xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
+    di = diameter[i]
+    found = _touching_entries(i, position, diameter, flags, partner, start, index, periodic_any, period,
+                              inverse_period, touching)
     fx = 0.0
     fy = 0.0
     fz = 0.0
@@ -300,16 +312,6 @@ def contact_forces_full(position, velocity, diameter, mass, flags, partner, coun
     return worst.max()
 
 
-def slab_count(count, longest_jump, threads):
-    """Number of slabs for :func:`contact_forces_half`: even, up to four per thread, each at least twice the longest
-    jump between list partners long (so that slabs processed together never write the same droplet); 1 (serial)
-    when the droplets are too few."""
-    slabs = 4 * max(int(threads), 1)
-    while slabs >= 2 and count // slabs < 2 * longest_jump + 1:
-        slabs -= 2
-    return max(slabs, 1)
-
-
 @njit(cache=True, inline="always")
 def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref,
                diameter_ref, damping, law, periodic_any, period, inverse_period, walls, wall_lower, wall_upper,
@@ -320,14 +322,8 @@ def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, cou
     for i in range(s * count // nslab, (s + 1) * count // nslab):
         xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
         di = diameter[i]
-        skip = _mutual_partner(i, flags, partner)
-        found = 0
-        for k in range(start[i], start[i + 1]):
-            j = index[k]
-            r2 = _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period)[3]
-            reach = 0.5 * (di + diameter[j])
-            touching[found] = k
-            found += (r2 < reach * reach) & (r2 > 0.0) & (j != skip)
+        found = _touching_entries(i, position, diameter, flags, partner, start, index, periodic_any, period,
+                                  inverse_period, touching)
         fx = 0.0
         fy = 0.0
         fz = 0.0
@@ -361,11 +357,10 @@ def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, cou
     return local
 
 
-def slab_count(count, longest_jump, threads=None):
+def slab_count(count, longest_jump):
     """Number of slabs for the half-list kernels: even, at most 8, each at least twice the longest jump between
     list partners long (so that slabs processed together never write the same droplet); 1 (serial) when the
-    droplets are too few. It does not depend on the thread count, so neither do the results (``threads`` is
-    accepted for compatibility and ignored)."""
+    droplets are too few. It does not depend on the thread count, so neither do the results."""
     slabs = 8
     while slabs >= 2 and count // slabs < 2 * longest_jump + 1:
         slabs -= 2
@@ -932,7 +927,7 @@ class DemStepper:
         nchunk = _chunks(n)
         walls = not self.periodic.all()
         if nl.half:
-            nslab = slab_count(n, nl.longest_jump, numba.get_num_threads())
+            nslab = slab_count(n, nl.longest_jump)
             self._ensure_candidates(nslab)
             worst = contact_forces_half(s.position, s.velocity, s.diameter, self.mass, s.flags, s.partner, n,
                                         nl.start, nl.index, self.stiffness_ref, self.diameter_ref, self.damping,
@@ -961,8 +956,8 @@ class DemStepper:
         replaced by the stepper's spare ones -- hold no references to them across calls), or, when a subclass adds
         forces in :meth:`compute_forces`, forces then kick-drift (:func:`integrate_kick_drift`). The last step ends
         complete. ``max_overlap_ratio`` is that of the last step, ``peak_overlap_ratio`` the largest over the
-        advance's steps (and any :meth:`compute_forces` since the advance began). Returns the droplet permutation if the droplets
-        were re-sorted (new p is old order[p]), else None.
+        advance's steps (and any :meth:`compute_forces` since the advance began). Returns the droplet permutation
+        if the droplets were re-sorted (new p is old order[p]), else None.
 
         Threads: one below :data:`PARALLEL_MIN_DROPLETS` droplets; else ``threads``, or when None the faster of one
         and all threads, re-timed every :data:`THREAD_PROBE_EVERY` steps in long advances (on a machine shared with
@@ -1070,8 +1065,6 @@ class DemStepper:
         done = 0
         while done < steps:
             if self._travel_bound > 0.5 * nl.skin:
-                if self.periodic.any():
-                    wrap_positions(s.position, n, self.lower, nl.period)
                 if pending:  # bring every droplet to the same time level before checking the list
                     self._travel_bound += finish_even_slabs(s.position, s.velocity, self.force, self.mass,
                                                             self.drag, fluid_velocity, self.body_acceleration,

@@ -204,7 +204,7 @@ def test_contact_kernels_match_numpy_twin(periodic, half):
     if half:
         damping = np.full(nl.index.shape[0], np.nan)
         dem.pair_damping(nl.start, nl.index, store.diameter, mass, n, 3.0, 0.5e-3, zeta, damping)
-        nslab = dem.slab_count(n, nl.longest_jump, 2)
+        nslab = dem.slab_count(n, nl.longest_jump)
         worst = dem.contact_forces_half(store.position, store.velocity, store.diameter, mass, store.flags,
                                         store.partner, n, nl.start, nl.index, 3.0, 0.5e-3, damping, law, nl.period,
                                         nl.inverse_period, *NO_WALLS, nslab,
@@ -239,8 +239,8 @@ def test_half_list_slabs_agree_with_one_slab_and_with_the_full_list():
     damping = np.zeros(half.index.shape[0])
     dem.pair_damping(half.start, half.index, store.diameter, mass, n, 3.0, 0.5e-3, 0.2, damping)
     safe = [s for s in (2, 4, 6, 8) if n // s >= 2 * half.longest_jump + 1]
-    assert len(safe) >= 2 and dem.slab_count(n, half.longest_jump, 2) == max(safe)
-    assert dem.slab_count(n, n // 3, 2) == 1
+    assert len(safe) >= 2 and dem.slab_count(n, half.longest_jump) == max(safe)
+    assert dem.slab_count(n, n // 3) == 1
     results = []
     for nslab in [1, *safe]:
         force = np.full((n, 3), np.nan)
