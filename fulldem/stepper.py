@@ -53,16 +53,6 @@ INTERPOLATE_COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 3], dtype=np.int64)
 SORT_INTERVAL = 50
 
 
-class CoupledDem(DemStepper):
-    """The DEM stepper of the coupled step.
-
-    The coupling's per-droplet external force F (buoyant weight and pressure force, held over a fluid step) enters
-    through the fluid velocity: dv/dt = (F + contacts)/m + (u - v)/tau is the same as contacts/m + (u + F/beta - v)/tau,
-    so the DEM sees u + F/beta, and its drag impulse then includes F h per step, which the coupling subtracts. This
-    keeps the contact-force computation free of extra terms, so whole sub-steps run as one fused pass.
-    """
-
-
 @dataclass
 class Counters:
     """Matte mass bookkeeping [kg] and event counts since t = 0."""
@@ -155,7 +145,7 @@ class Simulation:
         self.h = self.dt / self.substeps
         side = self.outlet_code[0]
         outlet_for_dem = (side, self.outlet_code[3], self.outlet_code[2], self.outlet_code[4]) if side >= 0 else None
-        self.dem = CoupledDem(self.store, self.lower, self.grid.size, self.periodic, self.h, self.stiffness_ref,
+        self.dem = DemStepper(self.store, self.lower, self.grid.size, self.periodic, self.h, self.stiffness_ref,
                               d_ref, fd.restitution, 0.25 * d_ref, np.zeros(3),
                               absorbing_bottom=self.absorbing_bottom, outlet=outlet_for_dem,
                               sort_on_rebuild=False)
@@ -184,13 +174,14 @@ class Simulation:
         self.owed_force = self.grid.zeros_faces()  # -J deposited, applied in the next fluid step [N/m^3]
         self.last = StepDiagnostics()
         self._dem_stale = False  # droplets were added or removed since the DEM last saw them
+        self._work = {}  # work arrays of the filtered kernel, by (purpose, index)
         self._alloc(self.store.capacity)
 
     # ------------------------------------------------------------------------------------------------ helpers
     def _alloc(self, capacity):
         self.beta = np.zeros(capacity)
         self.fluid_velocity = np.zeros((capacity, 3))
-        self.drift_velocity = np.zeros((capacity, 3))  # u + F/beta, what the DEM sees (see CoupledDem)
+        self.drift_velocity = np.zeros((capacity, 3))  # u + F/beta, what the DEM sees (see step)
         self.deposited = np.zeros((len(DEPOSIT_COMPONENTS), capacity))
         self.interpolated = np.zeros((len(INTERPOLATE_COMPONENTS), capacity))
         self.own = np.zeros(capacity)
@@ -230,10 +221,9 @@ class Simulation:
 
     def _persistent(self, key, shape, zero=False):
         """A work array of the filtered kernel kept between steps, zeroed on request."""
-        work = self.__dict__.setdefault("_work", {})
-        array = work.get(key)
+        array = self._work.get(key)
         if array is None or array.shape != shape:
-            array = work[key] = np.zeros(shape)
+            array = self._work[key] = np.zeros(shape)
         elif zero:
             array[...] = 0.0
         return array
@@ -424,8 +414,10 @@ class Simulation:
                           fd.sigma_cells, fd.sigma_diameter, fd.self_correction, self.mobility_ratios, self.mobility,
                           self.oseen_logs, self.oseen_values, self.beta)
 
-        # DEM sub-steps with the external force held over the fluid step, folded into the fluid velocity (see
-        # CoupledDem): the DEM's impulse is then drag + F h per sub-step
+        # DEM sub-steps with the external force F (buoyant weight and pressure force) held over the fluid step and
+        # folded into the fluid velocity: dv/dt = (F + contacts)/m + (u - v)/tau equals contacts/m + (u + F/beta -
+        # v)/tau, so the DEM sees u + F/beta and its contact kernels stay free of extra terms (whole sub-steps run
+        # fused); its drag impulse then includes F h per sub-step, subtracted below
         self.impulse[:n] = 0.0
         self.drift_velocity[:n] = self.fluid_velocity[:n] + self.external[:n] / self.beta[:n, None]
         self.dem.set_drag(self.beta)
