@@ -28,11 +28,8 @@ from fulldem.coupling import HASIMOTO
 from fulldem.droplets import DropletStore
 from fulldem.stepper import Simulation
 from settler.cases import load_case
-from settler.physics import STANDARD_GRAVITY
+from settler.physics import STANDARD_GRAVITY, richardson_zaki_factor, stokes_velocity
 
-SLAG_DENSITY = 3150.0  # kg/m^3, flash_smelting property set
-MATTE_DENSITY = 5100.0  # kg/m^3
-RICHARDSON_ZAKI = 4.65
 NITSCHE_BATCHELOR = 1.2  # 6/5: a drop of suspension, viscosity ratio 1 (Hadamard-Rybczynski)
 
 
@@ -167,9 +164,9 @@ def front_speed(record, t_start):
     return -float(np.polyfit(record.times[keep], record.front[keep], 1)[0])
 
 
-def cloud_overrides(diameter, cell, fluid_step, density_excess, viscosity, extra=()):
+def cloud_overrides(diameter, cell, fluid_step, slag_density, density_excess, viscosity, extra=()):
     return point_like_overrides(diameter, cell, fluid_step,
-                                [f"matte.density={SLAG_DENSITY + density_excess}",
+                                [f"matte.density={slag_density + density_excess}",
                                  f"slag.viscosity_reference={viscosity}", *extra])
 
 
@@ -211,12 +208,14 @@ def falling_cloud(n_a_over_r, *, cells_per_radius=4, box_radii=8, cell=5e-3, dia
     radius = cells_per_radius * cell
     box = box_radii * radius
     count = int(round(n_a_over_r * radius / (0.5 * diameter)))
-    u_cloud = reynolds * viscosity / (SLAG_DENSITY * 2.0 * radius)
+    slag_density = load_case("simple").slag.density  # the property set's [kg/m^3]
+    u_cloud = reynolds * viscosity / (slag_density * 2.0 * radius)
     u_stokes = u_cloud / (1.0 + NITSCHE_BATCHELOR * count * 0.5 * diameter / radius)
-    density_excess = 18.0 * viscosity * u_stokes / (STANDARD_GRAVITY * diameter**2)
+    density_excess = u_stokes / stokes_velocity(diameter, 1.0, 0.0, viscosity)  # Stokes, solved for it
     if fluid_step is None:
-        fluid_step = 0.7 * cell**2 / (6.0 * viscosity / SLAG_DENSITY)
-    case = load_case("simple", cloud_overrides(diameter, cell, fluid_step, density_excess, viscosity, extra))
+        fluid_step = 0.7 * cell**2 / (6.0 * viscosity / slag_density)
+    case = load_case("simple", cloud_overrides(diameter, cell, fluid_step, slag_density, density_excess, viscosity,
+                                               extra))
     positions = random_ball(np.random.default_rng(seed), count, (0.5 * box,) * 3, radius, diameter)
     store = DropletStore(count)
     store.add(positions, diameter, case.matte.density)
@@ -273,7 +272,7 @@ def check_hindered(phi, t_end, t_start=1.0, **setup):
     sim = hindered_suspension(phi, **setup)
     record = run_hindered(sim, t_end)
     u_stokes = sim.terminal_velocity(float(sim.store.diameter[0]))
-    u_rz = u_stokes * (1.0 - phi) ** RICHARDSON_ZAKI
+    u_rz = u_stokes * richardson_zaki_factor(phi)
     speed = front_speed(record, t_start)
     n = sim.store.count
     # every droplet is in the slag or counted settled (none lost through the periodic sides; positions are wrapped
@@ -307,7 +306,7 @@ def check_homogeneous(phi, t_start=0.5, t_end=1.5, **setup):
     """Run :func:`homogeneous_suspension` to ``t_end`` [s]; returns (the Simulation, the Richardson-Zaki velocity
     [m/s], the batch settling speeds [m/s] of :func:`batch_settling_speed` after every step past ``t_start``)."""
     sim = homogeneous_suspension(phi, **setup)
-    u_rz = sim.terminal_velocity(float(sim.store.diameter[0])) * (1.0 - phi) ** RICHARDSON_ZAKI
+    u_rz = sim.terminal_velocity(float(sim.store.diameter[0])) * richardson_zaki_factor(phi)
     speeds = []
     while sim.time < t_end - 1e-9:
         sim.step()

@@ -20,9 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fulldem.verification import RICHARDSON_ZAKI, check_cloud, check_hindered, check_homogeneous
+from fulldem.verification import check_cloud, check_hindered, check_homogeneous
 from settler.cases import load_case
 from settler.output import atomic_write_text
+from settler.physics import richardson_zaki_factor
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Heading of the hand-written part of the report, kept when the table is rewritten.
@@ -33,7 +34,7 @@ def hindered_row(phi, t_end, label, **setup):
     clock = time.time()
     ratio, record, sim, droplet_re = check_hindered(phi, t_end, **setup)
     u_stokes = sim.terminal_velocity(float(sim.store.diameter[0]))
-    u_rz = u_stokes * (1.0 - phi) ** RICHARDSON_ZAKI
+    u_rz = u_stokes * richardson_zaki_factor(phi)
     return (f"hindered, front | {label}, phi = {phi}, {record.count} droplets, t = 1-{t_end:g} s | "
             f"{ratio * u_rz * 1e3:.3f} mm/s | U_RZ = {u_rz * 1e3:.3f} mm/s | **{ratio:.3f}** | "
             f"{time.time() - clock:.0f} s"), ratio
