@@ -804,6 +804,21 @@ def kinetic_energy(velocity, mass, count):
 
 
 @njit(cache=True, parallel=True)
+def max_speed(velocity, count):
+    """Largest |v| of the first ``count`` droplets [m/s] (0 for none)."""
+    nchunk = min(count, 64)
+    if nchunk == 0:
+        return 0.0
+    worst = np.zeros(nchunk)
+    for c in prange(nchunk):
+        local = 0.0
+        for p in range(c * count // nchunk, (c + 1) * count // nchunk):
+            local = max(local, velocity[p, 0] ** 2 + velocity[p, 1] ** 2 + velocity[p, 2] ** 2)
+        worst[c] = local
+    return math.sqrt(worst.max())
+
+
+@njit(cache=True, parallel=True)
 def droplet_masses(diameter, density, count, mass):
     """mass[p] = rho pi d^3 / 6 [kg] (written in place)."""
     for p in prange(count):

@@ -33,6 +33,9 @@ from numba import njit, prange
 #: Cells per droplet above which the cell size is enlarged (keeps the cell arrays small in mostly empty boxes).
 MAX_CELLS_PER_DROPLET = 8
 
+#: Smallest row width of the one-pass scan's scratch array (partners of one droplet among the small ones).
+MIN_ROW_STRIDE = 8
+
 
 def cell_size_for(diameter, skin, quantile=0.99, cap=None) -> float:
     """Cell side [m] for binning: the ``quantile`` of the diameters [m] (at most ``cap`` [m]) plus the skin [m].
@@ -99,11 +102,19 @@ def bin_droplets(position, count, grid_lower, cell_size, shape, periodic, cell_x
         cell_id[p] = linear
 
 
-@njit(cache=True)
-def counting_sort(cell_id, count, cell_start, cell_droplets):
-    """Stable counting sort by cell: the droplets of cell c are ``cell_droplets[cell_start[c]:cell_start[c + 1]]``.
+@njit(cache=True, parallel=True)
+def ordered_cell_id(cell_xyz, count, shape, a0, a1, a2, cell_id):
+    """Linear cell index with axis a0 fastest and a2 slowest (written into cell_id (count,))."""
+    for p in prange(count):
+        cell_id[p] = cell_xyz[p, a0] + shape[a0] * (cell_xyz[p, a1] + shape[a1] * cell_xyz[p, a2])
 
-    cell_start (ncell + 1,) int64 and cell_droplets (>= count,) int64 are written in place.
+
+@njit(cache=True)
+def counting_sort(cell_id, count, cell_start, cell_droplets, slot):
+    """Stable counting sort by cell: the droplets of cell c are ``cell_droplets[cell_start[c]:cell_start[c + 1]]``,
+    in increasing index order, and droplet p sits at ``cell_droplets[slot[p]]``.
+
+    cell_start (ncell + 1,) int64, cell_droplets (>= count,) int64 and slot (>= count,) int64 are written in place.
     """
     ncell = cell_start.shape[0] - 1
     for c in range(ncell + 1):
@@ -116,6 +127,7 @@ def counting_sort(cell_id, count, cell_start, cell_droplets):
     for p in range(count):
         c = cell_id[p]
         cell_droplets[cell_start[c]] = p
+        slot[p] = cell_start[c]
         cell_start[c] += 1
     for c in range(ncell, 0, -1):
         cell_start[c] = cell_start[c - 1]
@@ -137,17 +149,18 @@ def _pair_within(position, diameter, i, j, skin, periodic_any, period, inverse_p
 
 @njit(cache=True, inline="always")
 def _scan_range(i, first, last, position, diameter, is_large, any_large, skin, periodic_any, period,
-                inverse_period, half, cell_droplets, fill, index, cursor):
-    """Partners of small droplet i among ``cell_droplets[first:last]``; returns (found, cursor)."""
+                inverse_period, cell_droplets, fill, index, cursor, limit):
+    """Partners of small droplet i among ``cell_droplets[first:last]``, written to ``index`` from ``cursor`` on
+    while below ``limit``; returns (found, cursor): all partners are counted, written or not."""
     found = 0
     for k in range(first, last):
         j = cell_droplets[k]
-        keep = (j != i) & ((not half) | (j > i))
+        keep = j != i
         if any_large:
             keep = keep & (not is_large[j])
         keep = keep & _pair_within(position, diameter, i, j, skin, periodic_any, period, inverse_period)
         if fill:
-            if keep:
+            if keep & (cursor < limit):
                 index[cursor] = j
                 cursor += 1
         found += keep
@@ -156,12 +169,21 @@ def _scan_range(i, first, last, position, diameter, is_large, any_large, skin, p
 
 @njit(cache=True, parallel=True)
 def scan_small(position, diameter, count, is_large, skin, period, inverse_period, shape, periodic, cell_xyz,
-               cell_start, cell_droplets, half, start, index, counts):
+               cell_start, cell_droplets, slot, half, start, index, counts, stride):
     """Pairs between droplets of at most the cell's diameter, from the 27 cells around each droplet.
 
-    Count pass (``index`` of length 0): writes counts[i]. Fill pass: writes row i from ``start[i]`` on. A half list
-    keeps j > i; large droplets are skipped (their pairs are found by :func:`scan_large`). Along x the neighbour
-    cells of a row are consecutive in the sorted order (unless a periodic x wraps), so they are scanned as one range.
+    Count pass (``index`` of length 0): writes counts[i]. Fill pass: writes row i from ``start[i]`` on. One-pass
+    mode (``stride`` > 0): writes at most ``stride`` partners of i from ``index[i * stride]`` on (a scratch array of
+    count x stride, compacted by :func:`compact_rows`) and counts[i] = all partners (more than ``stride``: the row
+    was cut, and the caller must scan again with a wider stride). Large
+    droplets are skipped (their pairs are found by :func:`scan_large`). Along x the neighbour cells of a row are
+    consecutive in the sorted order (unless a periodic x wraps), so they are scanned as one range.
+
+    A half list stores a pair in the row of the droplet in the lower cell (linear index), or of the lower droplet
+    index within one cell: each droplet scans only the 13 neighbour cells above its own and the droplets after it
+    in its own cell (from ``slot[i] + 1``: a cell's droplets are in index order), half the distance tests of the
+    full stencil. A partner's index may then be lower than the row's; once the droplets are sorted by cell (as the
+    stepper keeps them) it almost always is higher.
     """
     fill = index.shape[0] > 0
     periodic_any = periodic[0] or periodic[1] or periodic[2]
@@ -175,7 +197,13 @@ def scan_small(position, diameter, count, is_large, skin, period, inverse_period
             counts[i] = 0
             continue
         found = 0
-        cursor = start[i] if fill else 0
+        cursor = 0
+        limit = 0
+        if fill:
+            cursor = i * stride if stride > 0 else start[i]
+            limit = cursor + stride if stride > 0 else index.shape[0]
+        own_row = shape[0] * (cell_xyz[i, 1] + shape[1] * cell_xyz[i, 2])
+        own_cell = own_row + cell_xyz[i, 0]
         zf, zl, zw = _axis_range(cell_xyz[i, 2], 1, shape[2], periodic[2])
         yf, yl, yw = _axis_range(cell_xyz[i, 1], 1, shape[1], periodic[1])
         xf, xl, xw = _axis_range(cell_xyz[i, 0], 1, shape[0], periodic[0])
@@ -184,19 +212,41 @@ def scan_small(position, diameter, count, is_large, skin, period, inverse_period
             for ty in range(yf, yl + 1):
                 cy = ty % shape[1] if yw else ty
                 row = shape[0] * (cy + shape[1] * cz)
+                if half and row < own_row:
+                    continue
                 if not xw:
-                    got, cursor = _scan_range(i, cell_start[row + xf], cell_start[row + xl + 1], position, diameter,
-                                              is_large, any_large, skin, periodic_any, period, inverse_period, half,
-                                              cell_droplets, fill, index, cursor)
+                    first = cell_start[row + xf]
+                    if half and row == own_row:
+                        first = slot[i] + 1  # skips the row's cells below i's own and i's predecessors in it
+                    got, cursor = _scan_range(i, first, cell_start[row + xl + 1], position, diameter, is_large,
+                                              any_large, skin, periodic_any, period, inverse_period, cell_droplets,
+                                              fill, index, cursor, limit)
                     found += got
                 else:
                     for tx in range(xf, xl + 1):
                         cell = tx % shape[0] + row
-                        got, cursor = _scan_range(i, cell_start[cell], cell_start[cell + 1], position, diameter,
-                                                  is_large, any_large, skin, periodic_any, period, inverse_period,
-                                                  half, cell_droplets, fill, index, cursor)
+                        first = cell_start[cell]
+                        if half and row == own_row:
+                            if cell < own_cell:
+                                continue
+                            if cell == own_cell:
+                                first = slot[i] + 1
+                        got, cursor = _scan_range(i, first, cell_start[cell + 1], position, diameter, is_large,
+                                                  any_large, skin, periodic_any, period, inverse_period,
+                                                  cell_droplets, fill, index, cursor, limit)
                         found += got
         counts[i] = found
+
+
+@njit(cache=True, parallel=True)
+def compact_rows(scratch, stride, counts, start, count, index):
+    """Copy row i of a one-pass :func:`scan_small` (``scratch[i * stride:]``, counts[i] entries) to
+    ``index[start[i]:]``."""
+    for i in prange(count):
+        base = i * stride
+        to = start[i]
+        for k in range(counts[i]):
+            index[to + k] = scratch[base + k]
 
 
 @njit(cache=True)
@@ -334,10 +384,13 @@ class NeighbourList:
         self._cell_id = np.zeros(0, dtype=np.int64)
         self._cell_start = np.zeros(2, dtype=np.int64)
         self._cell_droplets = np.zeros(0, dtype=np.int64)
+        self._slot = np.zeros(0, dtype=np.int64)
         self._counts = np.zeros(0, dtype=np.int64)
         self._extra = np.zeros(0, dtype=np.int64)
         self._cursor = np.zeros(0, dtype=np.int64)
         self._is_large = np.zeros(0, dtype=np.bool_)
+        self._stride = MIN_ROW_STRIDE
+        self._scratch = np.zeros(0, dtype=np.int32)
 
     # ------------------------------------------------------------------ binning
     def _layout(self, position, diameter, count):
@@ -365,19 +418,38 @@ class NeighbourList:
         self._cell_xyz = _grow(self._cell_xyz, count)
         self._cell_id = _grow(self._cell_id, count)
         self._cell_droplets = _grow(self._cell_droplets, count)
+        self._slot = _grow(self._slot, count)
         ncell = int(np.prod(self.shape))
         self._cell_start = _grow(self._cell_start, ncell + 1)
         cell_start = self._cell_start[: ncell + 1]
         bin_droplets(position, count, self.grid_lower, self.cell_size, self.shape, self.periodic, self._cell_xyz,
                      self._cell_id)
-        counting_sort(self._cell_id, count, cell_start, self._cell_droplets)
+        counting_sort(self._cell_id, count, cell_start, self._cell_droplets, self._slot)
         return cell_start
 
     def spatial_order(self, position, diameter, count) -> np.ndarray:
-        """A permutation (count,) that sorts the droplets by cell (x fastest), for memory locality in the kernels."""
+        """A permutation (count,) that sorts the droplets by cell, for memory locality in the kernels.
+
+        The cells are taken in lexicographic order with the *slowest* axis chosen as the one whose fullest slab of
+        cells holds the fewest droplets. List partners then lie at most about two such slabs apart in memory, which
+        is what the half-list kernels' slabs must exceed to run in parallel (:func:`fulldem.dem.slab_count`). A flat
+        layer of droplets under the roof sorted with z slowest puts a whole layer between partners (a third of the
+        droplets in the simple case), leaving a single slab per phase: one thread.
+        """
         self._layout(position, diameter, count)
         self._bin(position, count)
-        return self._cell_droplets[:count].copy()
+        if count == 0:
+            return np.zeros(0, dtype=np.int64)
+        cell_xyz = self._cell_xyz[:count]
+        fullest = [np.bincount(cell_xyz[:, a], minlength=int(self.shape[a])).max() for a in range(3)]
+        slowest = int(np.argmin(fullest))
+        axes = [a for a in range(3) if a != slowest] + [slowest]
+        if axes == [0, 1, 2]:
+            return self._cell_droplets[:count].copy()
+        ordered_cell_id(self._cell_xyz, count, self.shape, axes[0], axes[1], axes[2], self._cell_id)
+        order = np.empty(count, dtype=np.int64)
+        counting_sort(self._cell_id, count, self._cell_start[: int(np.prod(self.shape)) + 1], order, self._slot)
+        return order
 
     # ------------------------------------------------------------------ building
     def build(self, position, diameter, count) -> None:
@@ -403,7 +475,17 @@ class NeighbourList:
         no_index = np.zeros(0, dtype=np.int32)
         args = (self.skin, self.period, self.inverse_period)
         geometry = (self.shape, self.periodic, self._cell_xyz, cell_start, self._cell_droplets)
-        scan_small(position, diameter, count, is_large, *args, *geometry, self.half, start, no_index, counts)
+        # one pass into rows of a fixed width (wide enough for the last build's rows, with a margin), then compacted;
+        # a cut row (rare: the packing densified) repeats the scan with the width it needed
+        while True:
+            stride = self._stride
+            self._scratch = _grow(self._scratch, count * stride)
+            scan_small(position, diameter, count, is_large, *args, *geometry, self._slot, self.half, start,
+                       self._scratch, counts, stride)
+            widest = int(counts[:count].max()) if count else 0
+            self._stride = max(MIN_ROW_STRIDE, widest + widest // 2)
+            if widest <= stride:
+                break
         extra[:count] = 0
         if large.size:
             scan_large(position, diameter, large, *args, self.cell_size, *geometry, is_large, self.half, no_index,
@@ -413,7 +495,7 @@ class NeighbourList:
         total = int(start[count])
         if total > self.index.shape[0]:
             self.index = _grow(self.index, total)
-        scan_small(position, diameter, count, is_large, *args, *geometry, self.half, start, self.index, counts)
+        compact_rows(self._scratch, stride, counts, start, count, self.index)
         if large.size:
             cursor = self._cursor
             cursor[:count] = start[:count] + counts[:count]

@@ -31,7 +31,7 @@ from settler.physics import STANDARD_GRAVITY, FeedSchedule, schiller_naumann_vel
 from . import coupling as cp
 from . import fluid as fl
 from .contacts import effective_mass, stable_step, stiffness_for_overlap
-from .dem import DemStepper, droplet_masses
+from .dem import DemStepper, droplet_masses, max_speed
 from .droplets import DropletStore
 from .feeding import SIDES, classify_exits, draw_inlet_candidates, place_without_overlap
 from .forces import DRAG_LAWS, drag_coefficients
@@ -51,6 +51,16 @@ INTERPOLATE_COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 3], dtype=np.int64)
 #: Droplets are re-sorted by neighbour cell (memory locality of the DEM and coupling passes) every this many fluid
 #: steps; they move a small fraction of a cell per step, and a sort also rebuilds the neighbour list.
 SORT_INTERVAL = 50
+
+#: Neighbour-list skin, in mean feed diameters: at least SKIN_MIN, at most SKIN_MAX, otherwise SKIN_TRAVEL times
+#: the largest droplet speed times dt, chosen at each list build of a step (feed, exits, sort). The list must be
+#: rebuilt once a droplet has travelled skin/2; a fed run rebuilds it every step anyway (insertions), so a skin
+#: that lasts one fluid step (skin/2 = 1.25 v_max dt) saves a second build, while a larger one would only lengthen
+#: the rows the contact loop filters. Measured on the simple case at 172 000 droplets (54 mm/s in its channel):
+#: 330-340 ms per step with the fixed 0.25 d skin, 270-280 ms with 0.5 d.
+SKIN_MIN = 0.25
+SKIN_MAX = 1.0
+SKIN_TRAVEL = 2.5
 
 
 @dataclass
@@ -145,8 +155,9 @@ class Simulation:
         self.h = self.dt / self.substeps
         side = self.outlet_code[0]
         outlet_for_dem = (side, self.outlet_code[3], self.outlet_code[2], self.outlet_code[4]) if side >= 0 else None
+        self.d_ref = d_ref
         self.dem = DemStepper(self.store, self.lower, self.grid.size, self.periodic, self.h, self.stiffness_ref,
-                              d_ref, fd.restitution, 0.25 * d_ref, np.zeros(3),
+                              d_ref, fd.restitution, SKIN_MIN * d_ref, np.zeros(3),
                               absorbing_bottom=self.absorbing_bottom, outlet=outlet_for_dem,
                               sort_on_rebuild=False)
 
@@ -368,10 +379,13 @@ class Simulation:
             self.insert(self.schedule.advance(self.time + self.dt))
         s = self.store
         self._ensure_capacity()
-        if s.count and self.steps % SORT_INTERVAL == 0:
+        if s.count and (self._dem_stale or self.steps % SORT_INTERVAL == 0):
+            # droplets appended at the inlet (or moved into the holes of exits) would otherwise lie far in memory
+            # from their neighbours, which cuts the parallel slabs of the DEM kernels to one (fulldem.dem.slab_count)
             reorder_store(s, self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
             self._dem_stale = True
         if self._dem_stale:  # one list build per step for this step's insertions, the last one's exits and a sort
+            self.dem.neighbours.skin = self.skin_for(max_speed(s.velocity, s.count))
             self.dem.droplets_changed()
             self._dem_stale = False
         n = s.count
@@ -442,6 +456,10 @@ class Simulation:
             raise FloatingPointError(f"runaway overlap: {worst:.3f} of a diameter at t = {self.time:.6g} s "
                                      f"(fulldem.overlap_abort = {fd.overlap_abort})")
         return self.last
+
+    def skin_for(self, speed):
+        """Neighbour-list skin [m] for droplets moving at most ``speed`` [m/s] (see :data:`SKIN_TRAVEL`)."""
+        return float(np.clip(SKIN_TRAVEL * speed * self.dt, SKIN_MIN * self.d_ref, SKIN_MAX * self.d_ref))
 
     # ------------------------------------------------------------------------------------------------ diagnostics
     def momentum(self):

@@ -106,6 +106,39 @@ def test_neighbour_list_matches_brute_force(periodic, half):
     assert nl.index.shape[0] >= len(i) and (nl.index.shape[0] & (nl.index.shape[0] - 1)) == 0  # grown by doubling
 
 
+def test_one_pass_scan_with_cut_rows_matches_brute_force(monkeypatch):
+    # rows wider than the scratch stride are cut and scanned again: force that on every build
+    monkeypatch.setattr(nb, "MIN_ROW_STRIDE", 1)
+    rng = np.random.default_rng(11)
+    box = np.array([0.004, 0.004, 0.004])
+    pos, d = _random_droplets(rng, 600, box, (False, True, False), large=(1.5e-3,))
+    for half in (True, False):
+        nl = nb.NeighbourList((0, 0, 0), box, (False, True, False), 0.2e-3, half=half)
+        nl.build(pos, d, len(d))
+        i, j = nl.pairs()
+        assert nl.longest_row > 3
+        bi, bj = nb.brute_force_pairs(pos, d, len(d), 0.2e-3, box, (False, True, False))
+        assert set(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist())) == set(zip(bi.tolist(), bj.tolist()))
+        assert len(i) == (1 if half else 2) * len(bi)
+
+
+def test_spatial_order_keeps_partners_close_in_a_flat_layer():
+    # a wide, thin layer (the fed droplets under the roof): sorting with the vertical axis slowest would put a whole
+    # layer of droplets between partners and leave the half-list kernels one slab per phase (one thread)
+    rng = np.random.default_rng(5)
+    n = 40000
+    box = np.array([0.08, 0.08, 0.004])
+    pos = rng.uniform(0.0, 1.0, (n, 3)) * box
+    d = np.full(n, 0.5e-3)
+    nl = nb.NeighbourList((0, 0, 0), box, (False, False, False), 0.125e-3)
+    order = nl.spatial_order(pos, d, n)
+    assert np.array_equal(np.sort(order), np.arange(n))
+    nl.build(pos[order], d[order], n)
+    # slabs of cells across the thin axis hold n/6 droplets each; across a wide axis about n/60
+    assert nl.longest_jump < n // 20
+    assert dem.slab_count(n, nl.longest_jump) == 8
+
+
 def test_neighbour_list_all_large_and_tiny_periodic_box():
     # every droplet larger than the cell diameter, and a periodic axis with only two cells
     rng = np.random.default_rng(3)
