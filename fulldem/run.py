@@ -68,8 +68,9 @@ def read_droplet_list(path, default_density):
     return store
 
 
-def time_series_row(sim: Simulation) -> dict:
-    """One row of the shared time-series schema from the simulation's current state."""
+def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
+    """One row of the shared time-series schema from the simulation's current state (``wall_time`` [s]: the run's
+    wall-clock time so far)."""
     s, n, c = sim.store, sim.store.count, sim.counters
     d = s.diameter[:n]
     down = -s.velocity[:n, 2]
@@ -96,6 +97,7 @@ def time_series_row(sim: Simulation) -> dict:
         "max_cell_reynolds": sim.last.get("max_cell_reynolds", math.nan),
         "max_cfl": sim.last.get("max_cfl", math.nan),
         "max_overlap_ratio": sim.last.get("max_overlap_ratio", math.nan),
+        "wall_time": wall_time,
     }
 
 
@@ -159,6 +161,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     sim = Simulation(case, droplets=store, feed=feed)
     sim.initial_mass = sim.mass_in_slag()
     rows = []
+    wall_before = 0.0  # wall-clock seconds spent before this process (by the runs this one resumes)
     snaps = SnapshotWriter(out, sim.grid)
     checkpoint = out / "checkpoint.npz"
     if resume:
@@ -170,6 +173,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
         if series.exists():
             rows = [r for r in read_time_series(series).to_dict("records") if r["time"] <= sim.time + 1e-12]
         snaps.entries = [tuple(e) for e in meta.get("snapshots", [])]
+        wall_before = float(meta.get("wall_time", 0.0))
         log(f"resumed from {checkpoint} at t = {sim.time:.6g} s, {sim.store.count} droplets")
     if case.coalescence.enabled or case.reaction.enabled:
         log("settler full: note: the coalescence and reaction submodels are not in the engine yet; this run has "
@@ -183,16 +187,22 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     log(f"fulldem: grid {sim.grid.shape} of {sim.grid.spacing * 1e3:g} mm, fluid step {sim.dt:g} s, "
         f"DEM step {sim.h:.3g} s ({sim.substeps} per fluid step), contact stiffness {sim.stiffness_ref:.3g} N/m")
 
+    wall_start = _time.perf_counter()
+
+    def wall_time():
+        return wall_before + _time.perf_counter() - wall_start
+
     def save_checkpoint_now():
         arrays, meta = checkpoint_state(sim)
         meta["snapshots"] = snaps.entries
+        meta["wall_time"] = wall_time()
         save_checkpoint(checkpoint, arrays, meta)
 
     next_row = (math.floor(sim.time / fd.output_interval + 1e-9) + 1) * fd.output_interval
     next_snap = ((math.floor(sim.time / fd.snapshot_interval + 1e-9) + 1) * fd.snapshot_interval
                  if fd.snapshot_interval > 0 else math.inf)
     if not rows:
-        rows.append(time_series_row(sim))
+        rows.append(time_series_row(sim, wall_time()))
         if fd.snapshot_interval > 0:
             snaps.write(sim.time, sim.store, sim.fluid, np.ones(sim.grid.shape))
     good = checkpoint_state(sim)
@@ -212,7 +222,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
                                f"{out / 'last_good.npz'}; try a smaller fulldem.fluid_step or fulldem.dem_step, "
                                "or a larger fulldem.max_overlap") from None
             if sim.time >= next_row - 1e-9:
-                rows.append(time_series_row(sim))
+                rows.append(time_series_row(sim, wall_time()))
                 write_time_series(time_series_frame(rows), out / "timeseries.csv")
                 good = checkpoint_state(sim)
                 next_row += fd.output_interval
@@ -229,7 +239,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     finally:
         bar.close()
     if not rows or rows[-1]["time"] < sim.time - 1e-12:
-        rows.append(time_series_row(sim))
+        rows.append(time_series_row(sim, wall_time()))
     frame = time_series_frame(rows)
     write_time_series(frame, out / "timeseries.csv")
     save_checkpoint_now()

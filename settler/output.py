@@ -37,6 +37,8 @@ TIME_SERIES: dict[str, tuple[str, str]] = {
     "max_cell_reynolds": ("-", "largest cell Reynolds number of the slag flow (full engine; NaN in reduced)"),
     "max_cfl": ("-", "largest advective CFL number of the slag flow (full engine; NaN in reduced)"),
     "max_overlap_ratio": ("-", "largest contact overlap / smaller diameter (full engine; NaN in reduced)"),
+    "wall_time": ("s", "wall-clock time the run has taken since t = 0, resumed runs included (full engine; NaN in "
+                       "reduced): its slope over time is the wall time per simulated second"),
 }
 
 

@@ -26,7 +26,7 @@ def test_every_preset_sets_up_and_runs(name):
     assert ts.time.iloc[-1] == pytest.approx(short)
     assert np.abs(ts.mass_balance_error).max() < 1e-10
     assert ts.mass_fed.iloc[-1] > 0.0 and ts.droplet_count.iloc[-1] > 0.0
-    for column in ("max_cell_reynolds", "max_cfl", "max_overlap_ratio"):
+    for column in ("max_cell_reynolds", "max_cfl", "max_overlap_ratio", "wall_time"):
         assert ts[column].isna().all()
     shape = (ts.shape[0], 2, model.cells, model.grid.size)
     assert result.number_density.shape == shape and result.diameter.shape == shape
