@@ -319,6 +319,9 @@ def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, cou
     """Add the forces of the half-list rows of slab s (each pair to both droplets, and the walls') to ``force``;
     returns the largest overlap ratio."""
     local = 0.0
+    # the planes as locals: the force writes below could alias the arrays, so LLVM would reload them per droplet
+    lx, ly, lz = wall_lower[0], wall_lower[1], wall_lower[2]
+    ux, uy, uz = wall_upper[0], wall_upper[1], wall_upper[2]
     for i in range(s * count // nslab, (s + 1) * count // nslab):
         xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
         di = diameter[i]
@@ -343,7 +346,9 @@ def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, cou
                 force[j, 2] -= gz
                 if overlap > local * small:
                     local = overlap / small
-        if walls:
+        ri = 0.5 * di
+        if walls and ((xi - lx < ri) | (ux - xi < ri) | (yi - ly < ri) | (uy - yi < ri) | (zi - lz < ri)
+                      | (uz - zi < ri)):
             gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, mass, wall_lower, wall_upper,
                                             outlet_side, outlet_height, outlet_transverse, outlet_radius,
                                             stiffness_ref, diameter_ref, wall_zeta, law)

@@ -249,10 +249,46 @@ def compact_rows(scratch, stride, counts, start, count, index):
             index[to + k] = scratch[base + k]
 
 
+@njit(cache=True, inline="always")
+def _scan_large_one(i, position, diameter, skin, period, inverse_period, cell_size, shape, periodic, cell_xyz,
+                    cell_start, cell_droplets, is_large, half, fill, index, cursor, counts):
+    """The pairs large droplet i owns (see :func:`scan_large`)."""
+    reach = diameter[i] + skin
+    zf, zl, zw = _axis_range(cell_xyz[i, 2], int(math.ceil(reach / cell_size[2])), shape[2], periodic[2])
+    yf, yl, yw = _axis_range(cell_xyz[i, 1], int(math.ceil(reach / cell_size[1])), shape[1], periodic[1])
+    xf, xl, xw = _axis_range(cell_xyz[i, 0], int(math.ceil(reach / cell_size[0])), shape[0], periodic[0])
+    for tz in range(zf, zl + 1):
+        cz = tz % shape[2] if zw else tz
+        for ty in range(yf, yl + 1):
+            cy = ty % shape[1] if yw else ty
+            row = shape[0] * (cy + shape[1] * cz)
+            for tx in range(xf, xl + 1):
+                cx = tx % shape[0] if xw else tx
+                cell = cx + row
+                for k in range(cell_start[cell], cell_start[cell + 1]):
+                    j = cell_droplets[k]
+                    if j == i:
+                        continue
+                    if is_large[j] and (diameter[j] > diameter[i] or (diameter[j] == diameter[i] and j < i)):
+                        continue  # j owns this pair
+                    if not _pair_within(position, diameter, i, j, skin, True, period, inverse_period):
+                        continue
+                    if fill:
+                        index[cursor[i]] = j
+                        cursor[i] += 1
+                    counts[i] += 1
+                    if not half:
+                        if fill:
+                            index[cursor[j]] = i
+                            cursor[j] += 1
+                        counts[j] += 1
+
+
 @njit(cache=True)
 def scan_large(position, diameter, large, skin, period, inverse_period, cell_size, shape, periodic, cell_xyz,
                cell_start, cell_droplets, is_large, half, index, cursor, counts):
-    """Pairs owned by the droplets larger than the cell's diameter (serial: they are few).
+    """Pairs owned by the droplets larger than the cell's diameter (serial; :func:`scan_large_half` runs a half
+    list's in parallel).
 
     A pair with a large droplet is owned by the larger of the two (ties: the lower index), which searches every cell
     within d_large + skin. Count pass (``index`` of length 0): adds to counts. Fill pass: appends to rows at
@@ -260,36 +296,18 @@ def scan_large(position, diameter, large, skin, period, inverse_period, cell_siz
     """
     fill = index.shape[0] > 0
     for q in range(large.shape[0]):
-        i = large[q]
-        reach = diameter[i] + skin
-        zf, zl, zw = _axis_range(cell_xyz[i, 2], int(math.ceil(reach / cell_size[2])), shape[2], periodic[2])
-        yf, yl, yw = _axis_range(cell_xyz[i, 1], int(math.ceil(reach / cell_size[1])), shape[1], periodic[1])
-        xf, xl, xw = _axis_range(cell_xyz[i, 0], int(math.ceil(reach / cell_size[0])), shape[0], periodic[0])
-        for tz in range(zf, zl + 1):
-            cz = tz % shape[2] if zw else tz
-            for ty in range(yf, yl + 1):
-                cy = ty % shape[1] if yw else ty
-                row = shape[0] * (cy + shape[1] * cz)
-                for tx in range(xf, xl + 1):
-                    cx = tx % shape[0] if xw else tx
-                    cell = cx + row
-                    for k in range(cell_start[cell], cell_start[cell + 1]):
-                        j = cell_droplets[k]
-                        if j == i:
-                            continue
-                        if is_large[j] and (diameter[j] > diameter[i] or (diameter[j] == diameter[i] and j < i)):
-                            continue  # j owns this pair
-                        if not _pair_within(position, diameter, i, j, skin, True, period, inverse_period):
-                            continue
-                        if fill:
-                            index[cursor[i]] = j
-                            cursor[i] += 1
-                        counts[i] += 1
-                        if not half:
-                            if fill:
-                                index[cursor[j]] = i
-                                cursor[j] += 1
-                            counts[j] += 1
+        _scan_large_one(large[q], position, diameter, skin, period, inverse_period, cell_size, shape, periodic,
+                        cell_xyz, cell_start, cell_droplets, is_large, half, fill, index, cursor, counts)
+
+
+@njit(cache=True, parallel=True)
+def scan_large_half(position, diameter, large, skin, period, inverse_period, cell_size, shape, periodic, cell_xyz,
+                    cell_start, cell_droplets, is_large, half, index, cursor, counts):
+    """:func:`scan_large` for a half list, in parallel: each large droplet writes only its own row and count."""
+    fill = index.shape[0] > 0
+    for q in prange(large.shape[0]):
+        _scan_large_one(large[q], position, diameter, skin, period, inverse_period, cell_size, shape, periodic,
+                        cell_xyz, cell_start, cell_droplets, is_large, True, fill, index, cursor, counts)
 
 
 @njit(cache=True)
@@ -465,6 +483,7 @@ class NeighbourList:
         is_large = self._is_large
         is_large[:count] = diameter[:count] > d_cell
         large = np.flatnonzero(is_large[:count])
+        large_scan = scan_large_half if self.half else scan_large
         self._counts = _grow(self._counts, count)
         self._extra = _grow(self._extra, count)
         self._cursor = _grow(self._cursor, count)
@@ -488,7 +507,7 @@ class NeighbourList:
                 break
         extra[:count] = 0
         if large.size:
-            scan_large(position, diameter, large, *args, self.cell_size, *geometry, is_large, self.half, no_index,
+            large_scan(position, diameter, large, *args, self.cell_size, *geometry, is_large, self.half, no_index,
                        self._cursor, extra)
         start[0] = 0
         np.cumsum(counts[:count] + extra[:count], out=start[1:])
@@ -500,7 +519,7 @@ class NeighbourList:
             cursor = self._cursor
             cursor[:count] = start[:count] + counts[:count]
             extra[:count] = 0
-            scan_large(position, diameter, large, *args, self.cell_size, *geometry, is_large, self.half, self.index,
+            large_scan(position, diameter, large, *args, self.cell_size, *geometry, is_large, self.half, self.index,
                        cursor, extra)
         self.count = count
         self.longest_row = int(np.diff(start).max()) if count else 0
