@@ -25,7 +25,11 @@ energy in every contact step (restitution 0.550 in the same collision); hence th
 the second half of one with the first half of the next (:func:`integrate_kick_drift`, :func:`step_fused`).
 
 The drag impulse exchanged over the step, J = beta integral (u - v) dt = m (v_new - v) - m h (a_old + a_new)/2, is
-added per droplet to an ``impulse`` array the caller zeroes, so the fluid can receive exactly -J.
+added per droplet to an ``impulse`` array the caller zeroes, so the fluid can receive exactly -J. Over consecutive
+steps the momentum share telescopes: :func:`integrate_initial` subtracts m v at the start, the step that ends an
+advance adds m v at the end, and the steps between add only the force share -h (F + m a_body), which is zero for a
+droplet without contacts when there is no body acceleration (the coupled stepper folds it into the fluid velocity):
+its impulse row is then not touched in the sub-steps. The array holds J only once the advance has ended.
 
 Work arrays (prepared by the caller): ``mass`` (cap,) [kg], ``force`` (cap, 3) [N] (contact + wall + any other
 force except drag and a_body), ``drag`` (cap, 3) the factors (E, phi1, phi2) of :func:`drag_factors_into`,
@@ -520,7 +524,7 @@ def integrate_initial(position, velocity, force, mass, drag, fluid_velocity, bod
     force (cap, 3) [N] at the current positions (contact + wall + other, no drag); drag (cap, 3) the factors of
     :func:`drag_factors_into`; fluid_velocity (cap, 3), or (1, 3) for one velocity everywhere [m/s];
     body_acceleration (3,) [m/s^2]; h [s]. Adds the first part of the drag impulse to ``impulse`` (cap, 3) [N s]
-    (an array with no rows: not tracked). Returns the largest displacement of a droplet in this step [m] (the
+    (-m v - h (F + m a_body)/2, see the module docstring; an array with no rows: not tracked). Returns the largest displacement of a droplet in this step [m] (the
     neighbour list's cheap validity bound). Next: forces at the new positions, then :func:`integrate_final` with
     the same drag factors and fluid velocity.
     """
@@ -545,8 +549,8 @@ def integrate_initial(position, velocity, force, mass, drag, fluid_velocity, bod
                 position[p, a] += step
                 moved += step * step
                 v_new = u + w * e + acc * kick
-                if track:
-                    impulse[p, a] += m * (v_new - v) - m * acc * half_h
+                if track:  # the momentum part telescopes: -m v here, +m v at the advance's end
+                    impulse[p, a] -= m * v + m * acc * half_h
                 velocity[p, a] = v_new
             local = max(local, moved)
         worst[c] = local
@@ -569,7 +573,7 @@ def integrate_final(velocity, force, mass, drag, body_acceleration, h, count, im
             acc = force[p, a] * inv_m + body_acceleration[a]
             velocity[p, a] += acc * kick
             if track:
-                impulse[p, a] += m * acc * (kick - half_h)
+                impulse[p, a] += m * velocity[p, a] - m * acc * half_h
 
 
 @njit(cache=True, inline="always")
@@ -582,7 +586,6 @@ def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, s
     e, phi1, phi2 = drag[p, 0], drag[p, 1], drag[p, 2]
     kick_end = phi2 / h
     kick_start = phi1 - kick_end
-    half_h = 0.5 * h
     moved = 0.0
     for a in range(3):
         f = fx if a == 0 else (fy if a == 1 else fz)
@@ -593,10 +596,15 @@ def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, s
         step = u * h + w * phi1 + acc * phi2
         position_out[p, a] = position[p, a] + step
         moved += step * step
-        v_new = u + w * e + acc * kick_start
-        if track:
-            impulse[p, a] += m * acc * (kick_end - half_h) + (m * (v_new - v) - m * acc * half_h)
-        velocity_out[p, a] = v_new
+        velocity_out[p, a] = u + w * e + acc * kick_start
+    # drag impulse: only the force's share, -h (F + m a_body) (the momentum share telescopes, see integrate_initial);
+    # a droplet free of contacts in a run without body acceleration (the coupled stepper's) has none, and its
+    # impulse row is then neither read nor written
+    if track and ((fx != 0.0) | (fy != 0.0) | (fz != 0.0) | (body_acceleration[0] != 0.0)
+                  | (body_acceleration[1] != 0.0) | (body_acceleration[2] != 0.0)):
+        impulse[p, 0] -= h * (fx + m * body_acceleration[0])
+        impulse[p, 1] -= h * (fy + m * body_acceleration[1])
+        impulse[p, 2] -= h * (fz + m * body_acceleration[2])
     return moved
 
 
@@ -677,7 +685,7 @@ def _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_vel
                 acc = force[p, a] * inv_m + body_acceleration[a]
                 velocity[p, a] += acc * kick_end
                 if track:
-                    impulse[p, a] += m * acc * (kick_end - half_h)
+                    impulse[p, a] += m * velocity[p, a] - m * acc * half_h
     return moved
 
 

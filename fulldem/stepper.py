@@ -384,9 +384,10 @@ class Simulation:
             # from their neighbours, which cuts the parallel slabs of the DEM kernels to one (fulldem.dem.slab_count)
             reorder_store(s, self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
             self._dem_stale = True
+        rebuilt = self._dem_stale
         if self._dem_stale:  # one list build per step for this step's insertions, the last one's exits and a sort
             self.dem.neighbours.skin = self.skin_for(max_speed(s.velocity, s.count))
-            self.dem.droplets_changed()
+            self.dem.droplets_changed()  # computes the contact forces at this state too
             self._dem_stale = False
         n = s.count
         self.start_position[:n] = s.position[:n]
@@ -435,7 +436,9 @@ class Simulation:
         self.impulse[:n] = 0.0
         self.drift_velocity[:n] = self.fluid_velocity[:n] + self.external[:n] / self.beta[:n, None]
         self.dem.set_drag(self.beta)
-        at_start = self.dem.compute_forces()
+        # forces at the step's start: those of the rebuild above, or recomputed (the last sub-step's kick changed the
+        # velocities, hence the dashpot forces, after its forces were computed)
+        at_start = self.dem.max_overlap_ratio if rebuilt else self.dem.compute_forces()
         self.dem.advance(self.substeps, self.drift_velocity, self.impulse)
         worst = max(at_start, self.dem.peak_overlap_ratio)
         self.impulse[:n] -= self.external[:n] * (self.substeps * self.h)
