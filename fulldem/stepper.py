@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit, prange
 
 from settler.physics import STANDARD_GRAVITY, FeedSchedule, schiller_naumann_velocity, stokes_velocity
 
@@ -61,6 +62,57 @@ SORT_INTERVAL = 50
 SKIN_MIN = 0.25
 SKIN_MAX = 1.0
 SKIN_TRAVEL = 2.5
+
+
+@njit(cache=True, parallel=True)
+def start_rows(position, diameter, velocity, count, inv_cell_volume, start_position, volume, values):
+    """Per droplet at x^n: start_position = position [m], volume [m^3], and the deposit rows (DEPOSIT_COMPONENTS):
+    volume / cell volume on the three face arrays and the cells, times the velocity for the flux rows."""
+    for p in prange(count):
+        vol = math.pi / 6.0 * diameter[p] ** 3
+        volume[p] = vol
+        share = vol * inv_cell_volume
+        for r in range(4):
+            values[r, p] = share
+        for a in range(3):
+            values[4 + a, p] = share * velocity[p, a]
+            start_position[p, a] = position[p, a]
+
+
+@njit(cache=True, parallel=True)
+def forcing_rows(seen, own, volume, mass, fluid_density, gravity, inv_cell_volume, count, fluid_velocity, external,
+                 eps_around):
+    """From the interpolated rows (INTERPOLATE_COMPONENTS): fluid velocity [m/s]; external force [N] = volume x
+    pressure-force density + buoyant weight (m - rho_f V) g; void fraction around the droplet, its own volume
+    share (``own``, the weight at its centre) removed, clipped to [0, 1]."""
+    for p in prange(count):
+        vol = volume[p]
+        buoyant = mass[p] - fluid_density * vol
+        for a in range(3):
+            fluid_velocity[p, a] = seen[a, p]
+            external[p, a] = vol * seen[3 + a, p] + buoyant * gravity[a]
+        eps = 1.0 - (seen[6, p] - own[p] * vol * inv_cell_volume)
+        eps_around[p] = min(max(eps, 0.0), 1.0)
+
+
+@njit(cache=True, parallel=True)
+def drift_rows(fluid_velocity, external, beta, count, drift_velocity, impulse):
+    """drift velocity u + F/beta [m/s] (what the DEM sub-steps see) and a zeroed impulse accumulator [N s]."""
+    for p in prange(count):
+        for a in range(3):
+            drift_velocity[p, a] = fluid_velocity[p, a] + external[p, a] / beta[p]
+            impulse[p, a] = 0.0
+
+
+@njit(cache=True, parallel=True)
+def owed_rows(impulse, external, duration, count, scale, values):
+    """Drag impulse J = DEM impulse - F duration [N s] (the external force was folded into the drift velocity), and
+    the rows ``values[a] = scale J_a`` the fluid is owed."""
+    for p in prange(count):
+        for a in range(3):
+            j = impulse[p, a] - external[p, a] * duration
+            impulse[p, a] = j
+            values[a, p] = scale * j
 
 
 @dataclass
@@ -200,6 +252,7 @@ class Simulation:
         self.table = cp.stencil_table(capacity)  # the droplets' stencils at x^n, shared by the step's three passes
         self.impulse = np.zeros((capacity, 3))
         self.external = np.zeros((capacity, 3))
+        self.volume = np.zeros(capacity)
         self.start_position = np.zeros((capacity, 3))
         self.per_droplet = np.zeros(capacity)
         self.mass = np.zeros(capacity)
@@ -390,13 +443,12 @@ class Simulation:
             self.dem.droplets_changed()  # computes the contact forces at this state too
             self._dem_stale = False
         n = s.count
-        self.start_position[:n] = s.position[:n]
+        inv_cell_volume = 1.0 / self.grid.cell_volume
 
         # volume and volume flux at x^n, one pass: eps on faces and cells, q on faces
-        volume = math.pi / 6.0 * s.diameter[:n] ** 3
         values = self.deposited
-        values[:4, :n] = volume / self.grid.cell_volume
-        values[4:, :n] = values[0, :n] * s.velocity[:n].T
+        volume = self.volume
+        start_rows(s.position, s.diameter, s.velocity, n, inv_cell_volume, self.start_position, volume, values)
         faces = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
         phi_cells = self.grid.zeros_cells()
         flux = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
@@ -418,12 +470,9 @@ class Simulation:
         seen = self.interpolated
         self.interpolate_many(s.position, (state.u, state.v, state.w, *pressure_force, phi_cells),
                               INTERPOLATE_COMPONENTS, seen, self.own, cp.LOAD)
-        self.fluid_velocity[:n] = seen[:3, :n].T
-        self.external[:n] = volume[:, None] * seen[3:6, :n].T \
-            + (self.mass[:n] - self.density * volume)[:, None] * self.gravity
         eps_around = self.eps_around
-        eps_around[:n] = 1.0 - (seen[6, :n] - self.own[:n] * volume / self.grid.cell_volume)
-        np.clip(eps_around[:n], 0.0, 1.0, out=eps_around[:n])
+        forcing_rows(seen, self.own, volume, self.mass, self.density, self.gravity, inv_cell_volume, n,
+                     self.fluid_velocity, self.external, eps_around)
         drag_coefficients(s.diameter, s.velocity, self.fluid_velocity, eps_around, n, self.density, self.viscosity,
                           self.drag_law, fd.hindrance == "di_felice", self.viscosity_ratio, self.grid.spacing,
                           fd.sigma_cells, fd.sigma_diameter, fd.self_correction, self.mobility_ratios, self.mobility,
@@ -433,18 +482,15 @@ class Simulation:
         # folded into the fluid velocity: dv/dt = (F + contacts)/m + (u - v)/tau equals contacts/m + (u + F/beta -
         # v)/tau, so the DEM sees u + F/beta and its contact kernels stay free of extra terms (whole sub-steps run
         # fused); its drag impulse then includes F h per sub-step, subtracted below
-        self.impulse[:n] = 0.0
-        self.drift_velocity[:n] = self.fluid_velocity[:n] + self.external[:n] / self.beta[:n, None]
+        drift_rows(self.fluid_velocity, self.external, self.beta, n, self.drift_velocity, self.impulse)
         self.dem.set_drag(self.beta)
         # forces at the step's start: those of the rebuild above, or recomputed (the last sub-step's kick changed the
         # velocities, hence the dashpot forces, after its forces were computed)
         at_start = self.dem.max_overlap_ratio if rebuilt else self.dem.compute_forces()
         self.dem.advance(self.substeps, self.drift_velocity, self.impulse)
         worst = max(at_start, self.dem.peak_overlap_ratio)
-        self.impulse[:n] -= self.external[:n] * (self.substeps * self.h)
-
-        # the fluid is owed -J, deposited where the droplets felt the fluid
-        values[:3, :n] = -self.impulse[:n].T / (self.dt * self.grid.cell_volume)
+        # ... and the fluid is owed -J, deposited where the droplets felt the fluid
+        owed_rows(self.impulse, self.external, self.substeps * self.h, n, -inv_cell_volume / self.dt, values)
         self.owed_force = self.deposit_many(self.start_position, values[:3], INTERPOLATE_COMPONENTS[:3],
                                             [np.zeros(self.grid.face_shape(a)) for a in range(3)], cp.LOAD)
         self.time += self.dt
