@@ -136,7 +136,7 @@ def test_spatial_order_keeps_partners_close_in_a_flat_layer():
     nl.build(pos[order], d[order], n)
     # slabs of cells across the thin axis hold n/6 droplets each; across a wide axis about n/60
     assert nl.longest_jump < n // 20
-    assert dem.slab_count(n, nl.longest_jump) == 8
+    assert dem.slab_count(n, nl.longest_jump) >= 8
 
 
 def test_neighbour_list_all_large_and_tiny_periodic_box():
@@ -271,7 +271,7 @@ def test_half_list_slabs_agree_with_one_slab_and_with_the_full_list():
     mass = np.asarray(store.mass(), dtype=float)
     damping = np.zeros(half.index.shape[0])
     dem.pair_damping(half.start, half.index, store.diameter, mass, n, 3.0, 0.5e-3, 0.2, damping)
-    safe = [s for s in (2, 4, 6, 8) if n // s >= 2 * half.longest_jump + 1]
+    safe = [s for s in range(2, dem.MAX_SLABS + 1, 2) if n // s >= 2 * half.longest_jump + 1]
     assert len(safe) >= 2 and dem.slab_count(n, half.longest_jump) == max(safe)
     assert dem.slab_count(n, n // 3) == 1
     results = []
