@@ -48,7 +48,7 @@ from numba import njit, prange
 
 from . import contacts
 from .droplets import COALESCING
-from .neighbours import NeighbourList, reorder_store, wrap_positions
+from .neighbours import NeighbourList, permute_rows, reorder_store, wrap_positions
 
 #: LLVM fast-math flags of the hot kernels: fused multiply-add and reciprocal; no reassociation (the pair forces
 #: stay exactly antisymmetric, so momentum is conserved to round-off) and no assumption that values are finite.
@@ -1085,7 +1085,7 @@ class DemStepper:
                 for arr in (self.mass, self.drag, self.force, impulse) + (
                         (fluid_velocity,) if len(fluid_velocity) > 1 else ()):
                     if len(arr) >= n:
-                        arr[:n] = arr[:n][new]
+                        permute_rows(arr, new)
                 self._order = new if self._order is None else self._order[new]
             self._build_list()
         else:  # the measured travel is a tighter bound than the sum of the steps' largest displacements

@@ -568,6 +568,28 @@ def brute_force_pairs(position, diameter, count, skin, box_size, periodic):
     return i.astype(np.int64), j.astype(np.int64)
 
 
+@njit(cache=True, parallel=True)
+def _gather_1d(source, order, out):
+    for p in prange(order.shape[0]):
+        out[p] = source[order[p]]
+
+
+@njit(cache=True, parallel=True)
+def _gather_2d(source, order, out):
+    for p in prange(order.shape[0]):
+        q = order[p]
+        for a in range(source.shape[1]):
+            out[p, a] = source[q, a]
+
+
+def permute_rows(array, order) -> None:
+    """``array[:n] = array[order]`` for n = len(order), gathered in parallel (1-D or 2-D arrays)."""
+    n = order.shape[0]
+    work = np.empty((n,) + array.shape[1:], dtype=array.dtype)
+    (_gather_1d if array.ndim == 1 else _gather_2d)(array, order, work)
+    array[:n] = work
+
+
 def reorder_store(store, order) -> None:
     """Permute the live droplets of a :class:`fulldem.droplets.DropletStore` so that new p is old ``order[p]``.
 
@@ -583,8 +605,7 @@ def reorder_store(store, order) -> None:
     new_index = np.empty(n, dtype=np.int64)
     new_index[order] = np.arange(n)
     for name in FIELDS:
-        arr = getattr(store, name)
-        arr[:n] = arr[:n][order]
+        permute_rows(getattr(store, name), order)
     partner = store.partner[:n]
     has = partner >= 0
     partner[has] = new_index[partner[has]]
