@@ -6,8 +6,8 @@ region where the paper's droplets are), the feed switched off so N stays fixed, 
 DEM steps. Throughput = N x DEM sub-steps / wall time of the coupled loop (fluid step, coupling and DEM together;
 set-up, compilation and the first step excluded). Wall time per simulated second = loop time / simulated time:
 at N = 130 000 (the paper's steady count in the simple model) it stands in for the steady-state cost of the
-simple case. It is an optimistic stand-in: the droplets here are spread in the channel, while a fed run also
-carries a packed layer under the roof, which cost 2.7-3 times as much per droplet at t = 7 s (README).
+simple case. It is an optimistic stand-in: a fed run also inserts droplets, re-sorts them and rebuilds the
+neighbour list every step; ``benchmarks/bench_simple.py`` measures the fed case itself.
 
 The machine is shared and noisy: compare ratios within one run, not absolute times across runs; the minimum and
 median fluid-step times and the 1-minute load average are printed for that reason.
