@@ -139,6 +139,27 @@ def test_spatial_order_keeps_partners_close_in_a_flat_layer():
     assert dem.slab_count(n, nl.longest_jump) >= 8
 
 
+@pytest.mark.parametrize("half", [True, False])
+def test_neighbour_list_with_cells_numbered_along_another_axis_order(half):
+    # a flat layer makes spatial_order number the cells with a wide axis slowest; later builds use that order
+    rng = np.random.default_rng(13)
+    box = np.array([0.012, 0.010, 0.002])
+    periodic = (True, False, False)
+    pos, d = _random_droplets(rng, 1500, box, periodic, large=(1.6e-3, 1.1e-3))
+    nl = nb.NeighbourList((0, 0, 0), box, periodic, 0.125e-3, half=half)
+    order = nl.spatial_order(pos, d, len(d))
+    assert nl.axes[2] != 2  # z, the thin axis, is no longer the slowest
+    pos, d = pos[order], d[order]
+    nl.build(pos, d, len(d))
+    i, j = nl.pairs()
+    bi, bj = nb.brute_force_pairs(pos, d, len(d), 0.125e-3, box, periodic)
+    assert len(bi) > 500
+    assert set(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist())) == set(zip(bi.tolist(), bj.tolist()))
+    assert len(i) == (1 if half else 2) * len(bi)
+    if half:
+        assert np.mean(j > i) > 0.95  # cells numbered like the memory order: partners lie ahead
+
+
 def test_neighbour_list_all_large_and_tiny_periodic_box():
     # every droplet larger than the cell diameter, and a periodic axis with only two cells
     rng = np.random.default_rng(3)
