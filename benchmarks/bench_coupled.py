@@ -112,7 +112,7 @@ def main():
               f"{r['wall_per_sim_second']:>14.1f} {r['overlap']:>11.3g} {r['rss_gib']:>7.2f} GiB {r['load']:>5.2f}",
               flush=True)
     print("targets (issue): >= 2e7 particle-steps/s at 130 000 droplets; <= 100 s wall per simulated second of the "
-          "simple case at steady state; DEM step >= 5e-5 s")
+          "simple case at steady state (measured on the fed case by benchmarks/bench_simple.py); DEM step >= 5e-5 s")
 
 
 if __name__ == "__main__":
