@@ -827,16 +827,10 @@ def kinetic_energy(velocity, mass, count):
 @njit(cache=True, parallel=True)
 def max_speed(velocity, count):
     """Largest |v| of the first ``count`` droplets [m/s] (0 for none)."""
-    nchunk = min(count, 64)
-    if nchunk == 0:
-        return 0.0
-    worst = np.zeros(nchunk)
-    for c in prange(nchunk):
-        local = 0.0
-        for p in range(c * count // nchunk, (c + 1) * count // nchunk):
-            local = max(local, velocity[p, 0] ** 2 + velocity[p, 1] ** 2 + velocity[p, 2] ** 2)
-        worst[c] = local
-    return math.sqrt(worst.max())
+    worst = 0.0
+    for p in prange(count):  # a max reduction
+        worst = max(worst, velocity[p, 0] ** 2 + velocity[p, 1] ** 2 + velocity[p, 2] ** 2)
+    return math.sqrt(worst)
 
 
 @njit(cache=True, parallel=True)

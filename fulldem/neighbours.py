@@ -149,8 +149,8 @@ def _pair_within(position, diameter, i, j, skin, periodic_any, period, inverse_p
 
 @njit(cache=True, inline="always")
 def _scan_range(i, first, last, position, diameter, is_large, any_large, skin, periodic_any, period,
-                inverse_period, cell_droplets, fill, index, cursor, limit):
-    """Partners of small droplet i among ``cell_droplets[first:last]``, written to ``index`` from ``cursor`` on
+                inverse_period, cell_droplets, rows, cursor, limit):
+    """Partners of small droplet i among ``cell_droplets[first:last]``, written to ``rows`` from ``cursor`` on
     while below ``limit``; returns (found, cursor): all partners are counted, written or not."""
     found = 0
     for k in range(first, last):
@@ -159,25 +159,23 @@ def _scan_range(i, first, last, position, diameter, is_large, any_large, skin, p
         if any_large:
             keep = keep & (not is_large[j])
         keep = keep & _pair_within(position, diameter, i, j, skin, periodic_any, period, inverse_period)
-        if fill:
-            if keep & (cursor < limit):
-                index[cursor] = j
-                cursor += 1
+        if keep & (cursor < limit):
+            rows[cursor] = j
+            cursor += 1
         found += keep
     return found, cursor
 
 
 @njit(cache=True, parallel=True)
 def scan_small(position, diameter, count, is_large, skin, period, inverse_period, shape, periodic, cell_xyz,
-               cell_start, cell_droplets, slot, half, start, index, counts, stride):
-    """Pairs between droplets of at most the cell's diameter, from the 27 cells around each droplet.
+               cell_start, cell_droplets, slot, half, rows, stride, counts):
+    """Pairs between droplets of at most the cell's diameter, from the 27 cells around each droplet, in one pass.
 
-    Count pass (``index`` of length 0): writes counts[i]. Fill pass: writes row i from ``start[i]`` on. One-pass
-    mode (``stride`` > 0): writes at most ``stride`` partners of i from ``index[i * stride]`` on (a scratch array of
-    count x stride, compacted by :func:`compact_rows`) and counts[i] = all partners (more than ``stride``: the row
-    was cut, and the caller must scan again with a wider stride). Large
-    droplets are skipped (their pairs are found by :func:`scan_large`). Along x the neighbour cells of a row are
-    consecutive in the sorted order (unless a periodic x wraps), so they are scanned as one range.
+    Writes at most ``stride`` partners of droplet i from ``rows[i * stride]`` on (a count x stride scratch array,
+    compacted by :func:`compact_rows`) and counts[i] = all its partners; more than ``stride`` means the row was cut
+    and the caller must scan again with a wider stride. Large droplets are skipped (their pairs are found by
+    :func:`scan_large`). Along the fastest axis the neighbour cells of a row are consecutive in the sorted order
+    (unless that axis is periodic and wraps), so they are scanned as one range.
 
     A half list stores a pair in the row of the droplet in the lower cell (linear index), or of the lower droplet
     index within one cell: each droplet scans only the 13 neighbour cells above its own and the droplets after it
@@ -185,7 +183,6 @@ def scan_small(position, diameter, count, is_large, skin, period, inverse_period
     full stencil. A partner's index may then be lower than the row's; once the droplets are sorted by cell (as the
     stepper keeps them) it almost always is higher.
     """
-    fill = index.shape[0] > 0
     periodic_any = periodic[0] or periodic[1] or periodic[2]
     any_large = False
     for p in range(count):
@@ -197,11 +194,8 @@ def scan_small(position, diameter, count, is_large, skin, period, inverse_period
             counts[i] = 0
             continue
         found = 0
-        cursor = 0
-        limit = 0
-        if fill:
-            cursor = i * stride if stride > 0 else start[i]
-            limit = cursor + stride if stride > 0 else index.shape[0]
+        cursor = i * stride
+        limit = cursor + stride
         own_row = shape[0] * (cell_xyz[i, 1] + shape[1] * cell_xyz[i, 2])
         own_cell = own_row + cell_xyz[i, 0]
         zf, zl, zw = _axis_range(cell_xyz[i, 2], 1, shape[2], periodic[2])
@@ -220,7 +214,7 @@ def scan_small(position, diameter, count, is_large, skin, period, inverse_period
                         first = slot[i] + 1  # skips the row's cells below i's own and i's predecessors in it
                     got, cursor = _scan_range(i, first, cell_start[row + xl + 1], position, diameter, is_large,
                                               any_large, skin, periodic_any, period, inverse_period, cell_droplets,
-                                              fill, index, cursor, limit)
+                                              rows, cursor, limit)
                     found += got
                 else:
                     for tx in range(xf, xl + 1):
@@ -233,7 +227,7 @@ def scan_small(position, diameter, count, is_large, skin, period, inverse_period
                                 first = slot[i] + 1
                         got, cursor = _scan_range(i, first, cell_start[cell + 1], position, diameter, is_large,
                                                   any_large, skin, periodic_any, period, inverse_period,
-                                                  cell_droplets, fill, index, cursor, limit)
+                                                  cell_droplets, rows, cursor, limit)
                         found += got
         counts[i] = found
 
@@ -327,21 +321,14 @@ def max_travel(position, reference_position, diameter, reference_diameter, count
     The list stays valid while this is at most skin/2: two droplets then cannot have closed their gap by more
     than the skin.
     """
-    nchunk = min(count, 64)
-    if nchunk == 0:
-        return 0.0
-    worst = np.zeros(nchunk)
-    for c in prange(nchunk):
-        local = 0.0
-        for p in range(c * count // nchunk, (c + 1) * count // nchunk):
-            d2 = 0.0
-            for a in range(3):
-                delta = _minimum_image(position[p, a] - reference_position[p, a], period[a], inverse_period[a])
-                d2 += delta * delta
-            travel = math.sqrt(d2) + max(0.0, 0.5 * (diameter[p] - reference_diameter[p]))
-            local = max(local, travel)
-        worst[c] = local
-    return worst.max()
+    worst = 0.0
+    for p in prange(count):
+        d2 = 0.0
+        for a in range(3):
+            delta = _minimum_image(position[p, a] - reference_position[p, a], period[a], inverse_period[a])
+            d2 += delta * delta
+        worst = max(worst, math.sqrt(d2) + max(0.0, 0.5 * (diameter[p] - reference_diameter[p])))
+    return worst
 
 
 @njit(cache=True, parallel=True)
@@ -452,9 +439,9 @@ class NeighbourList:
         The cells are taken in lexicographic order with the *slowest* axis chosen as the one whose fullest slab of
         cells holds the fewest droplets (a change needs fewer than :data:`AXIS_SWITCH` times the current one's). List
         partners then lie at most about two such slabs apart in memory, which is what the half-list kernels' slabs
-        must exceed to run in parallel (:func:`fulldem.dem.slab_count`). A flat layer of droplets under the roof sorted with z slowest puts a whole
-        layer between partners (a third of the droplets in the simple case), leaving one slab per phase: one
-        thread. The order is kept (``axes``) for the following builds, whose cells are numbered the same way, so a
+        must exceed to run in parallel (:func:`fulldem.dem.slab_count`). A flat layer of droplets under the roof
+        sorted with z slowest puts a whole layer between partners (a third of the droplets in the simple case),
+        leaving one slab per phase: one thread. The order is kept (``axes``) for the following builds, whose cells are numbered the same way, so a
         half list's rows hold partners ahead in memory (measured 15 % faster in a dense bed than numbering the cells
         differently from the memory order).
         """
@@ -503,8 +490,8 @@ class NeighbourList:
         while True:
             stride = self._stride
             self._scratch = _grow(self._scratch, count * stride)
-            scan_small(position, diameter, count, is_large, *args, *geometry, self._slot, self.half, start,
-                       self._scratch, counts, stride)
+            scan_small(position, diameter, count, is_large, *args, *geometry, self._slot, self.half, self._scratch,
+                       stride, counts)
             widest = int(counts[:count].max()) if count else 0
             self._stride = max(MIN_ROW_STRIDE, widest + widest // 2)
             if widest <= stride:
