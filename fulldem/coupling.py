@@ -195,6 +195,13 @@ def droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sig
                     table_weights[p, st, axis, i] = wts[st, axis, i]
 
 
+@njit(cache=True, inline="always")
+def _stencil_sets(component):
+    """Which stencil set (1: faces, 0: cell centres) each axis x, y, z uses for grid array ``component`` (0-2 the
+    face arrays of u, v, w: faces along their own axis; 3 the cells)."""
+    return (1 if component == 0 else 0), (1 if component == 1 else 0), (1 if component == 2 else 0)
+
+
 @njit(cache=True)
 def _zero_slab(buf, out, m):
     """Zero the part of one chunk's work slab ``buf`` (m, NX, NY, NZ) that the m arrays ``out`` cover."""
@@ -250,10 +257,7 @@ def deposit_many(position, diameter, values, count, components, out, spacing, lo
                 v = values[k, p]
                 if v == 0.0:
                     continue
-                c = components[k]
-                sx = 1 if c == 0 else 0
-                sy = 1 if c == 1 else 0
-                sz = 1 if c == 2 else 0
+                sx, sy, sz = _stencil_sets(components[k])
                 nz = counts[sz, 2]
                 for a in range(counts[sx, 0]):
                     ia = idx[sx, 0, a]
@@ -294,10 +298,7 @@ def interpolate_many(position, diameter, count, components, fields, out, own, sp
                              cut, idx, wts, counts, table_first, table_count, table_weights, mode)
             for k in range(m):
                 field = fields[k]
-                c = components[k]
-                sx = 1 if c == 0 else 0
-                sy = 1 if c == 1 else 0
-                sz = 1 if c == 2 else 0
+                sx, sy, sz = _stencil_sets(components[k])
                 nz = counts[sz, 2]
                 acc = 0.0
                 for a in range(counts[sx, 0]):
@@ -374,10 +375,7 @@ def cic_deposit_many(position, values, count, components, out, spacing, lower, s
                 v = values[k, p]
                 if v == 0.0:
                     continue
-                c = components[k]
-                sx = 1 if c == 0 else 0
-                sy = 1 if c == 1 else 0
-                sz = 1 if c == 2 else 0
+                sx, sy, sz = _stencil_sets(components[k])
                 l0, l1 = nodes[sz, 2, 0], nodes[sz, 2, 1]
                 wl0, wl1 = weights[sz, 2, 0], weights[sz, 2, 1]
                 for a in range(2):
@@ -407,10 +405,7 @@ def cic_interpolate_many(position, count, components, fields, out, spacing, lowe
             _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights)
             for k in range(m):
                 field = fields[k]
-                c = components[k]
-                sx = 1 if c == 0 else 0
-                sy = 1 if c == 1 else 0
-                sz = 1 if c == 2 else 0
+                sx, sy, sz = _stencil_sets(components[k])
                 l0, l1 = nodes[sz, 2, 0], nodes[sz, 2, 1]
                 wl0, wl1 = weights[sz, 2, 0], weights[sz, 2, 1]
                 acc = 0.0
