@@ -298,8 +298,8 @@ def contact_forces_full(position, velocity, diameter, mass, flags, partner, coun
 
     Each droplet sums its own row, so threads never write the same entry. ``damping`` (entries,) [N s/m] from
     :func:`pair_damping`; ``candidates`` (nchunk, longest row) int32: work rows. Walls: planes from
-    :func:`wall_planes`, outlet and law as in :func:`wall_forces`, damping ratio ``wall_zeta``. Returns the largest overlap ratio (overlap / smaller diameter) [-]. Mutual coalescence partners
-    exert no force on each other.
+    :func:`wall_planes`, outlet and law as in :func:`wall_forces`, damping ratio ``wall_zeta``. Returns the largest
+    overlap ratio (overlap / smaller diameter) [-]. Mutual coalescence partners exert no force on each other.
     """
     periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
     worst = np.zeros(nchunk)
@@ -325,9 +325,6 @@ def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, cou
     """Add the forces of the half-list rows of slab s (each pair to both droplets, and the walls') to ``force``;
     returns the largest overlap ratio."""
     local = 0.0
-    # the planes as locals: the force writes below could alias the arrays, so LLVM would reload them per droplet
-    lx, ly, lz = wall_lower[0], wall_lower[1], wall_lower[2]
-    ux, uy, uz = wall_upper[0], wall_upper[1], wall_upper[2]
     for i in range(s * count // nslab, (s + 1) * count // nslab):
         xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
         di = diameter[i]
@@ -352,9 +349,7 @@ def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, cou
                 force[j, 2] -= gz
                 if overlap > local * small:
                     local = overlap / small
-        ri = 0.5 * di
-        if walls and ((xi - lx < ri) | (ux - xi < ri) | (yi - ly < ri) | (uy - yi < ri) | (zi - lz < ri)
-                      | (uz - zi < ri)):
+        if walls:
             gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, mass, wall_lower, wall_upper,
                                             outlet_side, outlet_height, outlet_transverse, outlet_radius,
                                             stiffness_ref, diameter_ref, wall_zeta, law)
@@ -531,9 +526,9 @@ def integrate_initial(position, velocity, force, mass, drag, fluid_velocity, bod
     force (cap, 3) [N] at the current positions (contact + wall + other, no drag); drag (cap, 3) the factors of
     :func:`drag_factors_into`; fluid_velocity (cap, 3), or (1, 3) for one velocity everywhere [m/s];
     body_acceleration (3,) [m/s^2]; h [s]. Adds the first part of the drag impulse to ``impulse`` (cap, 3) [N s]
-    (-m v - h (F + m a_body)/2, see the module docstring; an array with no rows: not tracked). Returns the largest displacement of a droplet in this step [m] (the
-    neighbour list's cheap validity bound). Next: forces at the new positions, then :func:`integrate_final` with
-    the same drag factors and fluid velocity.
+    (-m v - h (F + m a_body)/2, see the module docstring; an array with no rows: not tracked). Returns the largest
+    displacement of a droplet in this step [m] (the neighbour list's cheap validity bound). Next: forces at the new
+    positions, then :func:`integrate_final` with the same drag factors and fluid velocity.
     """
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
