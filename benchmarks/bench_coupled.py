@@ -107,7 +107,8 @@ def main():
           f"{'particle-steps/s':>17} {'wall s / sim s':>14} {'max overlap':>11} {'peak RSS':>9} {'load':>5}")
     for n, kernel in [(n, k) for n in args.n for k in args.kernels]:
         r = bench(n, args.steps, [f"fulldem.kernel={kernel}", *args.case_override])
-        print(f"{kernel:>8} {r['remaining']:>9d} {r['substeps']:>8d} {r['dem_step']:>9.3g} {r['ms_per_fluid_step']:>13.1f} "
+        print(f"{kernel:>8} {r['remaining']:>9d} {r['substeps']:>8d} {r['dem_step']:>9.3g} "
+              f"{r['ms_per_fluid_step']:>13.1f} "
               f"{'(%.0f, %.0f)' % (r['ms_min'], r['ms_median']):>15} {r['throughput']:>17.3g} "
               f"{r['wall_per_sim_second']:>14.1f} {r['overlap']:>11.3g} {r['rss_gib']:>7.2f} GiB {r['load']:>5.2f}",
               flush=True)

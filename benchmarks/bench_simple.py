@@ -54,7 +54,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--end-time", type=float, default=5.5, help="simulated time to run to [s] (default 5.5)")
     parser.add_argument("--window", type=float, default=0.5, help="width of the reported windows [s] (default 0.5)")
-    parser.add_argument("--out", default=None, help="run folder (default: a temporary one, removed afterwards)")
+    parser.add_argument("--out", default=None, help="run folder (default: a temporary one, removed afterwards); a run already there "
+                        "is resumed from its checkpoint")
     parser.add_argument("--case-override", action="append", default=[], help="KEY=VALUE for the simple case")
     args = parser.parse_args(argv)
     case = load_case("simple", args.case_override)  # time-series rows every 0.1 s (fulldem.output_interval)

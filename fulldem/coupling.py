@@ -157,8 +157,8 @@ NO_TABLE = stencil_table(0, 1)
 @njit(cache=True)
 def droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sigma_cells, sigma_diameter, cut, idx,
                      wts, counts, table_first, table_count, table_weights, mode):
-    """:func:`stencils` of droplet p, computed, computed and stored in row p of the
-    table, or loaded from it.
+    """:func:`stencils` of droplet p: computed (``mode`` COMPUTE), computed and stored in row p of the table
+    (STORE), or loaded from it (LOAD).
 
     The nodes of one set are consecutive (modulo the axis length on periodic axes), so a row keeps the first node.
     """

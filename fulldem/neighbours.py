@@ -441,9 +441,9 @@ class NeighbourList:
         partners then lie at most about two such slabs apart in memory, which is what the half-list kernels' slabs
         must exceed to run in parallel (:func:`fulldem.dem.slab_count`). A flat layer of droplets under the roof
         sorted with z slowest puts a whole layer between partners (a third of the droplets in the simple case),
-        leaving one slab per phase: one thread. The order is kept (``axes``) for the following builds, whose cells are numbered the same way, so a
-        half list's rows hold partners ahead in memory (measured 15 % faster in a dense bed than numbering the cells
-        differently from the memory order).
+        leaving one slab per phase: one thread. The order is kept (``axes``) for the following builds, whose cells
+        are numbered the same way, so a half list's rows hold partners ahead in memory (measured 15 % faster in a
+        dense bed than numbering the cells differently from the memory order).
         """
         self._layout(position, diameter, count)
         self._bin(position, count)

@@ -49,15 +49,16 @@ DEPOSIT_COMPONENTS = np.array([0, 1, 2, 3, 0, 1, 2], dtype=np.int64)
 #: Fields interpolated at x^n after the fluid step: fluid velocity and pressure force on the faces, volume fraction
 #: at the cells.
 INTERPOLATE_COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 3], dtype=np.int64)
-#: Droplets are re-sorted by neighbour cell (memory locality of the DEM and coupling passes) every this many fluid
-#: steps; they move a small fraction of a cell per step, and a sort also rebuilds the neighbour list.
+#: Droplets are re-sorted by neighbour cell (memory locality of the DEM and coupling passes) in every step in which
+#: some entered or left, and otherwise every this many fluid steps (they move a small fraction of a cell per step);
+#: a sort also rebuilds the neighbour list.
 SORT_INTERVAL = 50
 
 #: Neighbour-list skin, in mean feed diameters: at least SKIN_MIN, at most SKIN_MAX, otherwise SKIN_TRAVEL times
-#: the largest droplet speed times dt, chosen at each re-sort of the droplets (every step with feed or exits). The list must be
-#: rebuilt once a droplet has travelled skin/2; a fed run rebuilds it every step anyway (insertions), so a skin
-#: that lasts one fluid step (skin/2 = 1.25 v_max dt) saves a second build, while a larger one would only lengthen
-#: the rows the contact loop filters. Measured on the simple case at 172 000 droplets (54 mm/s in its channel):
+#: the largest droplet speed times dt, chosen at each re-sort of the droplets. The list must be rebuilt once a
+#: droplet has travelled skin/2; a fed run rebuilds it every step anyway (insertions), so a skin that lasts one
+#: fluid step (skin/2 = 1.25 v_max dt) saves a second build, while a larger one would only lengthen the rows the
+#: contact loop filters. Measured on the simple case at 172 000 droplets (54 mm/s in its channel):
 #: 330-340 ms per step with the fixed 0.25 d skin, 270-280 ms with 0.5 d.
 SKIN_MIN = 0.25
 SKIN_MAX = 1.0
