@@ -6,11 +6,11 @@ number is never computed two ways.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
 
 from .cases import Case
 from .physics import (FORM_LUO, FORM_SEED, coalescence_probability, droplet_rate, hadamard_rybczynski_factor,
@@ -63,17 +63,31 @@ class FeedSummary:
     slowness_factor: float  # sum_k w_k (d_mean / d_k)^2 over mass fractions w_k [-]
 
 
+def _ieee(record):
+    """The record with its floats as NumPy float64s.
+
+    Their arithmetic overflows to inf and divides by zero to inf or nan (under ``np.errstate(all="ignore")``) where
+    Python floats raise, so a valid but absurd case (a 1e-300 m droplet, a 1e308 Pa s slag) still gets its numbers
+    and its plausibility warnings instead of a ZeroDivisionError or OverflowError.
+    """
+    return dataclasses.replace(record, **{k: np.float64(v) for k, v in vars(record).items() if type(v) is float})
+
+
 def feed_summary(case: Case) -> FeedSummary:
     """Rate, mean mass and size range of the case's feed, for either feed distribution."""
-    f, rho_p = case.feed, case.matte.density
+    with np.errstate(all="ignore"):
+        return _feed_summary(_ieee(case.feed), np.float64(case.matte.density))
+
+
+def _feed_summary(f, rho_p) -> FeedSummary:
     if getattr(f, "distribution", "normal") == "table":
         d = np.asarray(f.table_diameters, dtype=float)
         w = np.asarray(f.table_mass_fractions, dtype=float)
         rate = float(table_droplet_rate(f.mass_rate, d, w, rho_p))
-        d_mean = float(np.sum(w * d))
-        mean_mass = f.mass_rate / rate if rate > 0 else float(np.sum(w * rho_p * math.pi / 6.0 * d**3))
-        return FeedSummary(rate, mean_mass, "matte rate / droplets per second (table)", d_mean, float(d.min()),
-                           float(d.max()), float(np.sum(w * (d_mean / d) ** 2)))
+        d_mean = np.sum(w * d)
+        mean_mass = f.mass_rate / rate if rate > 0 else np.sum(w * rho_p * math.pi / 6.0 * d**3)
+        return FeedSummary(rate, mean_mass, "matte rate / droplets per second (table)", d_mean, d.min(), d.max(),
+                           np.sum(w * (d_mean / d) ** 2))
     dist = (f.scale_std, f.scale_min, f.scale_max)
     return FeedSummary(droplet_rate(f.mass_rate, f.mean_diameter, rho_p, *dist),
                        mean_droplet_mass(f.mean_diameter, rho_p, *dist), "rho pi/6 d_mean^3 E[s^3]",
@@ -82,9 +96,17 @@ def feed_summary(case: Case) -> FeedSummary:
 
 
 def derived_numbers(case: Case) -> dict[str, list[Quantity]]:
-    """Derived numbers of a case, grouped by topic (dict of lists of :class:`Quantity`)."""
-    f, s, m, g = case.feed, case.slag, case.matte, case.geometry
-    mu = case.slag_viscosity
+    """Derived numbers of a case, grouped by topic (dict of lists of :class:`Quantity`).
+
+    Values far outside the laws' ranges give inf or nan where the arithmetic overflows, never an exception.
+    """
+    with np.errstate(all="ignore"):
+        return _derived_numbers(case)
+
+
+def _derived_numbers(case: Case) -> dict[str, list[Quantity]]:
+    f, s, m, g = _ieee(case.feed), _ieee(case.slag), _ieee(case.matte), _ieee(case.geometry)
+    mu = np.float64(case.slag_viscosity)
     rho_p = m.density
     dist = (f.scale_std, f.scale_min, f.scale_max)
     groups: dict[str, list[Quantity]] = {}
@@ -135,6 +157,8 @@ def derived_numbers(case: Case) -> dict[str, list[Quantity]]:
     if phi_dilute <= 0.0:
         phi_hindered, note = 0.0, "no matte feed"
     elif phi_dilute < flux_peak:
+        from scipy import optimize  # imported here: scipy.optimize would slow every `settler` command's start
+
         phi_hindered = optimize.brentq(lambda p: p * (1.0 - p) ** n - phi_dilute, 0.0, phi_peak)
         note = "phi (1 - phi)^4.65 = dilute estimate"
     else:
@@ -191,13 +215,17 @@ def derived_numbers(case: Case) -> dict[str, list[Quantity]]:
 
 
 def format_numbers(groups: dict[str, list[Quantity]]) -> str:
-    """Plain-text table of :func:`derived_numbers`."""
+    """Plain-text table of :func:`derived_numbers`, every line a TOML comment (``# ...``).
+
+    ``settler info CASE > my.toml`` prints the resolved case followed by this table, so the table must not break the
+    TOML: the output loads as the case again.
+    """
     lines = []
     for group, items in groups.items():
-        lines.append(f"{group}:")
+        lines.append(f"# {group}:")
         for q in items:
             value = f"{q.value:.4g}" if isinstance(q.value, float) else str(q.value)
-            lines.append(f"  {q.name:<52s} {value:>12s} {q.unit:<7s} {q.note}")
+            lines.append(f"#   {q.name:<52s} {value:>12s} {q.unit:<7s} {q.note}".rstrip())
     return "\n".join(lines)
 
 
@@ -205,3 +233,104 @@ def as_records(groups: dict[str, list[Quantity]]) -> list[dict]:
     """Flat list of dicts (group, name, value, unit, note), e.g. for JSON or pandas."""
     return [{"group": g, "name": q.name, "value": float(np.float64(q.value)), "unit": q.unit, "note": q.note}
             for g, items in groups.items() for q in items]
+
+
+# ------------------------------------------------------------------------------------------------- plausibility
+@dataclass(frozen=True)
+class PlausibleRange:
+    """Range of one quantity that the laws of settler.physics were made for, and why."""
+
+    low: float
+    high: float
+    unit: str
+    reason: str
+
+
+#: What the laws were made for. The schema (settler.cases.SCHEMA) only refuses values no law can take (signs, zeros);
+#: a value outside these ranges is accepted but warned about by :func:`plausibility_warnings`, because the laws and
+#: the fitted constants behind them were not made for it. The ranges are deliberately wide: a warning means "far
+#: outside", not "unusual".
+PLAUSIBLE_RANGES: dict[str, PlausibleRange] = {
+    "slag viscosity": PlausibleRange(
+        0.01, 10.0, "Pa s",
+        "copper-smelting slags measure about 0.05-1 Pa s at 1220-1320 C; the Arrhenius law with E_a of 160-370 "
+        "kJ/mol is fitted there"),
+    "slag density": PlausibleRange(
+        2500.0, 4500.0, "kg/m^3", "molten iron-silicate (fayalite) slags are about 2800-3800 kg/m^3"),
+    "matte density": PlausibleRange(
+        3500.0, 6000.0, "kg/m^3", "Cu2S-FeS mattes lie between 3973 (FeS) and 5274 kg/m^3 (Cu2S) by Eq. 4"),
+    "slag temperature": PlausibleRange(
+        1400.0, 1700.0, "K", "flash-smelting settlers run at about 1490-1600 K; the slag viscosity law and the "
+        "thermodynamic data are used near there"),
+    "interfacial tension": PlausibleRange(
+        0.01, 1.0, "N/m", "measured matte-slag interfacial tensions are about 0.05-0.6 N/m"),
+    "mean fed diameter": PlausibleRange(
+        1e-6, 50e-3, "m", "the seed paper's droplets are 0.35-0.65 mm; below 1 um Brownian motion, above 50 mm "
+        "droplet break-up, neither of which the laws include"),
+    "Re_p schiller_naumann": PlausibleRange(
+        0.0, 800.0, "-", "the Schiller-Naumann drag correlation is fitted for Re_p < 800"),
+    "Re_p stokes": PlausibleRange(
+        0.0, 1.0, "-", "Stokes drag holds for creeping flow, Re_p < 1"),
+}
+
+
+def _outside(value: float, r: PlausibleRange) -> bool:
+    return not (r.low <= value <= r.high)  # NaN counts as outside
+
+
+def _range_text(r: PlausibleRange) -> str:
+    unit = "" if r.unit == "-" else " " + r.unit
+    where = f"above {r.high:g}{unit}, the limit" if r.low <= 0.0 else f"outside {r.low:g} to {r.high:g}{unit}, the range"
+    return f"{where} the laws were made for ({r.reason})"
+
+
+def plausibility_warnings(case: Case) -> list[str]:
+    """Warnings, one line each, for values of a validated case far outside what the laws were made for.
+
+    Each names the key(s), the value and the range of :data:`PLAUSIBLE_RANGES`. An empty list: nothing to warn
+    about. The case is not refused: a study may leave the ranges on purpose.
+    """
+    warnings = []
+    s, m = case.slag, case.matte
+    mu = case.slag_viscosity
+
+    r = PLAUSIBLE_RANGES["slag viscosity"]
+    if _outside(mu, r):
+        if s.activation_energy == 0.0 or s.temperature == s.reference_temperature:
+            how = f"slag.viscosity_reference = {s.viscosity_reference:g} Pa s"
+        else:
+            how = (f"slag.viscosity_reference = {s.viscosity_reference:g} Pa s at slag.reference_temperature = "
+                   f"{s.reference_temperature:g} K with slag.activation_energy = {s.activation_energy:g} J/mol gives "
+                   f"{mu:.3g} Pa s at slag.temperature = {s.temperature:g} K")
+        warnings.append(f"slag viscosity: {how}: {_range_text(r)}")
+
+    for key, value, name in (("slag.density", s.density, "slag density"),
+                             ("matte.density", m.density, "matte density"),
+                             ("slag.temperature", s.temperature, "slag temperature"),
+                             ("matte.interfacial_tension", m.interfacial_tension, "interfacial tension")):
+        r = PLAUSIBLE_RANGES[name]
+        if _outside(value, r):
+            warnings.append(f"{key} = {value:g} {r.unit}: {_range_text(r)}")
+
+    summary = feed_summary(case)
+    r = PLAUSIBLE_RANGES["mean fed diameter"]
+    if _outside(summary.mean_diameter, r):
+        key = ("the mass-weighted mean of feed.table_diameters" if case.feed.distribution == "table"
+               else "feed.mean_diameter")
+        warnings.append(f"{key} = {summary.mean_diameter:g} m: {_range_text(r)}")
+
+    # The largest droplet a run can hold: the coalescence size limit, or else the largest fed droplet.
+    if case.coalescence.enabled:
+        key, d = "coalescence.size_limit", case.coalescence.size_limit
+    elif case.feed.distribution == "table":
+        key, d = "max(feed.table_diameters)", summary.largest
+    else:
+        key, d = "feed.mean_diameter x feed.scale_max", summary.largest
+    with np.errstate(all="ignore"):
+        v = float(settling_velocity(case, d))
+        re = float(reynolds_number(d, v, s.density, mu))
+    r = PLAUSIBLE_RANGES[f"Re_p {case.drag.law}"]
+    if _outside(re, r):
+        warnings.append(f"{key} = {d:g} m: the droplet Reynolds number at its terminal velocity ({v:.3g} m/s) is "
+                        f"Re_p = {re:.3g} with drag.law = {case.drag.law!r}: {_range_text(r)}")
+    return warnings

@@ -8,10 +8,13 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
 
 def _truncated_normal(std, scale_min, scale_max):
+    # scipy.stats is imported here, not at the top: it takes about half a second, and every `settler` command
+    # (even --version) imports this module through settler.cases.
+    from scipy import stats
+
     a, b = (scale_min - 1.0) / std, (scale_max - 1.0) / std
     return stats.truncnorm(a, b, loc=1.0, scale=std)
 
