@@ -23,10 +23,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+# DATA_DIR: folder of the property sets and case presets: the SETTLER_DATA environment variable, else the checkout's
+# data/, else the copy installed with the package (see settler.paths).
+from .paths import DATA_DIR, DATA_DIR_SOURCE
 from .physics import PROBABILITY_FORMS, cu2s_fraction_from_density, matte_density, slag_viscosity
-
-#: Folder of the property sets and case presets (override with the SETTLER_DATA environment variable).
-DATA_DIR = Path(os.environ.get("SETTLER_DATA", Path(__file__).resolve().parents[1] / "data"))
 
 
 class CaseError(ValueError):
@@ -304,8 +304,13 @@ def _toml_value(value) -> str:
 
 # ----------------------------------------------------------------------------------------------------------- loading
 def list_presets() -> list[str]:
-    """Names of the case presets shipped in data/cases/."""
-    return sorted(p.stem for p in (DATA_DIR / "cases").glob("*.toml"))
+    """Names of the case presets shipped in data/cases/; CaseError if there are none (a broken installation)."""
+    folder = DATA_DIR / "cases"
+    names = sorted(p.stem for p in folder.glob("*.toml"))
+    if not names:
+        raise CaseError(f"no case presets (*.toml) in {folder} (data folder from {DATA_DIR_SOURCE}); allowed: a "
+                        "data folder holding cases/ and properties/: set SETTLER_DATA to one, or reinstall settler")
+    return names
 
 
 def _read_toml(path: Path, what: str) -> dict:
@@ -314,8 +319,15 @@ def _read_toml(path: Path, what: str) -> dict:
             return tomllib.load(fh)
     except FileNotFoundError:
         raise CaseError(f"{what} file {path} does not exist") from None
+    except IsADirectoryError:
+        raise CaseError(f"{what} file {path} is a folder; allowed: a TOML file") from None
+    except UnicodeDecodeError as exc:
+        raise CaseError(f"{what} file {path} is not UTF-8 text (byte {exc.object[exc.start:exc.start + 1]!r} at "
+                        f"offset {exc.start}); allowed: a UTF-8 TOML file") from None
     except tomllib.TOMLDecodeError as exc:
         raise CaseError(f"{what} file {path} is not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise CaseError(f"{what} file {path} cannot be read: {exc.strerror or exc}") from None
 
 
 def case_path(name_or_path: str | os.PathLike) -> Path:
@@ -465,7 +477,13 @@ def _check_feed_table(f):
 
 def _check_consistency(case: Case):
     """Checks that involve several keys."""
-    g, f = case.geometry, case.feed
+    g, f, s = case.geometry, case.feed, case.slag
+    mu = case.slag_viscosity
+    if not (math.isfinite(mu) and mu > 0.0):
+        raise CaseError(f"slag.activation_energy = {s.activation_energy:g} J/mol with slag.temperature = "
+                        f"{s.temperature:g} K: the Arrhenius law gives a slag viscosity of {mu!r} Pa s (from "
+                        f"slag.viscosity_reference = {s.viscosity_reference:g} Pa s at slag.reference_temperature = "
+                        f"{s.reference_temperature:g} K); allowed: values that give a finite viscosity > 0")
     cx, cy = case.inlet_center
     r_in = 0.5 * g.inlet_diameter
     if not (r_in <= cx <= g.width - r_in and r_in <= cy <= g.depth - r_in):

@@ -33,6 +33,8 @@ from pathlib import Path
 import cantera as ct
 import numpy as np
 
+from .paths import DATA_DIR
+
 __all__ = [
     "DEFAULT_MECHANISM",
     "STANDARD_PRESSURE",
@@ -54,8 +56,9 @@ __all__ = [
     "x_cu2s_from_mass_fraction_cu",
 ]
 
-DEFAULT_MECHANISM = Path(__file__).resolve().parents[1] / "data" / "thermo" / "matte_slag.yaml"
-"""Cantera input file with the phases ``gas``, ``matte``, ``slag``, ``slag-FeO-SiO2`` and ``cu2s-solid``."""
+DEFAULT_MECHANISM = DATA_DIR / "thermo" / "matte_slag.yaml"
+"""Cantera input file with the phases ``gas``, ``matte``, ``slag``, ``slag-FeO-SiO2`` and ``cu2s-solid`` (in the data
+folder of :mod:`settler.paths`: SETTLER_DATA, the checkout's data/ or the installed copy)."""
 
 STANDARD_PRESSURE = 1.0e5
 """Standard pressure p° [Pa]: 1 bar, the standard state of the NASA (McBride et al. 1993) and JANAF data."""

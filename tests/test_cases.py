@@ -138,3 +138,98 @@ def test_every_number_in_data_carries_its_source(path):
     numeric = re.compile(r"^\s*\w+\s*=\s*[-+]?(\d|\.\d|\[)")
     missing = [line for line in path.read_text().splitlines() if numeric.match(line) and not SOURCE_TAG.search(line)]
     assert not missing, f"{path.name}: numbers without a source tag: {missing}"
+
+
+# ------------------------------------------------------------------------ unreadable files, broken installs (issue 10)
+def _one_line_error(call, *args) -> str:
+    with pytest.raises(CaseError) as info:
+        call(*args)
+    message = str(info.value)
+    assert "\n" not in message, message
+    return message
+
+
+def test_case_file_that_is_not_utf8_is_refused(tmp_path):
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes('[case]\nname = "café"\n'.encode("latin-1"))
+    message = _one_line_error(load_case, bad)
+    assert str(bad) in message and "not UTF-8" in message and "allowed: a UTF-8 TOML file" in message
+    assert "b'\\xe9'" in message  # the offending byte
+
+
+def test_case_path_that_is_a_folder_is_refused(tmp_path):
+    message = _one_line_error(load_case, tmp_path)
+    assert f"case file {tmp_path} is a folder; allowed: a TOML file" == message
+    folder = tmp_path / "looks_like.toml"
+    folder.mkdir()
+    assert "is a folder" in _one_line_error(load_case, folder)
+
+
+@pytest.fixture
+def data_copy(tmp_path, monkeypatch):
+    """A copy of the data folder that settler.cases reads instead of the real one."""
+    import shutil
+
+    import settler.cases
+
+    copy = tmp_path / "data"
+    shutil.copytree(DATA_DIR, copy, ignore=shutil.ignore_patterns("reference", "calibration"))
+    monkeypatch.setattr(settler.cases, "DATA_DIR", copy)
+    return copy
+
+
+def test_property_set_that_is_not_utf8_or_a_folder_is_refused(data_copy):
+    props = data_copy / "properties" / "flash_smelting.toml"
+    props.write_bytes(props.read_bytes() + b"\n# \xff\xfe\n")
+    message = _one_line_error(load_case, "simple")
+    assert f"property set file {props} is not UTF-8" in message
+    (data_copy / "properties" / "folder.toml").mkdir()
+    message = _one_line_error(load_case, "simple", ["case.properties=folder"])
+    assert f"property set file {data_copy / 'properties' / 'folder.toml'} is a folder" in message
+
+
+def test_no_presets_is_an_error_naming_where_it_looked(data_copy):
+    for preset in (data_copy / "cases").glob("*.toml"):
+        preset.unlink()
+    message = _one_line_error(list_presets)
+    assert f"no case presets (*.toml) in {data_copy / 'cases'}" in message and "SETTLER_DATA" in message
+
+
+@pytest.mark.parametrize("temperature, viscosity", [(300.0, "inf"), (3000.0, "0.0")])
+def test_arrhenius_overflow_is_refused(temperature, viscosity):
+    """E_a = 1e9 J/mol: exp overflows (cold) or underflows (hot); this used to be a ZeroDivisionError in info."""
+    overrides = {"slag.activation_energy": 1e9, "slag.temperature": temperature}
+    message = _one_line_error(resolve, _simple_raw(), overrides)
+    assert message.startswith(f"slag.activation_energy = 1e+09 J/mol with slag.temperature = {temperature:g} K")
+    assert f"slag viscosity of {viscosity} Pa s" in message and "allowed: values that give a finite viscosity > 0" \
+        in message
+
+
+def test_data_dir_order(tmp_path):
+    """SETTLER_DATA, else the checkout's data/, else the copy beside the installed package."""
+    from settler.paths import find_data_dir
+
+    checkout = tmp_path / "checkout"
+    (checkout / "settler").mkdir(parents=True)
+    (checkout / "data").mkdir()
+    (checkout / "pyproject.toml").write_text("")
+    assert find_data_dir({"SETTLER_DATA": "/elsewhere"}, checkout / "settler")[0] == Path("/elsewhere")
+    assert find_data_dir({"SETTLER_DATA": ""}, checkout / "settler")[0] == checkout / "data"
+    assert find_data_dir({}, checkout / "settler")[0] == checkout / "data"
+    site = tmp_path / "site-packages"
+    (site / "settler").mkdir(parents=True)
+    (site / "data").mkdir()  # some other distribution's top-level data/ is not a checkout
+    path, source = find_data_dir({}, site / "settler")
+    assert path == site / "settler" / "data" and source == "the installed package"
+
+
+def test_importing_cases_leaves_scipy_stats_and_the_plotting_stack_out():
+    """Every `settler` command imports settler.cases; scipy.stats alone used to cost about half a second."""
+    import subprocess
+    import sys
+
+    heavy = ("scipy.stats", "scipy.optimize", "pandas", "matplotlib", "cantera")
+    out = subprocess.run([sys.executable, "-c", "import sys, settler.cases, settler.derived\n"
+                          f"print([m for m in {heavy!r} if m in sys.modules])"],
+                         capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
