@@ -8,15 +8,21 @@ from __future__ import annotations
 import math
 import sys
 
+from settler.arguments import seconds
+
+from .limits import MAX_OUTPUTS
+
 
 def add_arguments(parser):
     """Options of ``settler reduced`` beyond CASE and the overrides."""
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="output folder: timeseries.csv, distribution.npz, case.toml, metadata.json")
-    parser.add_argument("--end-time", type=float, metavar="S", help="simulated time to stop at [s] "
-                                                                     "(default: popbal.end_time of the case)")
-    parser.add_argument("--output-interval", type=float, metavar="S",
-                        help="simulated time between outputs [s] (default: popbal.output_interval)")
+    parser.add_argument("--end-time", type=seconds("--end-time"), metavar="S",
+                        help="simulated time to stop at [s], a finite number > 0 (default: popbal.end_time of the "
+                             "case)")
+    parser.add_argument("--output-interval", type=seconds("--output-interval"), metavar="S",
+                        help="simulated time between outputs [s], a finite number > 0; at most "
+                             f"{MAX_OUTPUTS} outputs (default: popbal.output_interval)")
     progress = parser.add_mutually_exclusive_group()
     progress.add_argument("--progress", action="store_true", default=None, help="print progress lines to stderr")
     progress.add_argument("--quiet", action="store_true",
@@ -24,12 +30,16 @@ def add_arguments(parser):
 
 
 def main(args) -> int:
-    """Run ``settler reduced``; CaseError is reported by settler.cli (exit status 2)."""
+    """Run ``settler reduced``; CaseError is reported by settler.cli (exit status 2), and so are the refusals of
+    run() (options out of range, too many outputs, arrays over popbal.limits.memory_limit())."""
     from . import run, setup
+    from .driver import check_run
 
     model = setup(args.case, args.overrides)
     progress = False if args.quiet else args.progress
     try:
+        # the size checks first, so that their messages name the options rather than run()'s arguments
+        check_run(model, args.end_time, args.output_interval, names=("--end-time", "--output-interval"))
         result = run(model, end_time=args.end_time, output_interval=args.output_interval, progress=progress)
     except ValueError as exc:
         print(f"settler reduced: error: {exc}", file=sys.stderr)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import io
 import math
+import numbers
 import os
 import sys
 import time as wallclock
@@ -34,6 +35,7 @@ import pandas as pd
 from settler.cases import Case
 from settler.output import atomic_write_bytes, time_series_frame, write_run_metadata, write_time_series
 
+from . import limits
 from .kernels import (AGE, FES_REMOVED, NEGLIGIBLE_VOLUME_FRACTION, NUMBER, QUANTITIES, cell_properties,
                       coalesce_zone, react_zone, transport_zone)
 from .model import CHANNEL, OUTER, ZONES, Model, setup
@@ -245,12 +247,49 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
     return most
 
 
+def _seconds(name: str, value) -> float:
+    """A simulated time argument [s]: a finite number > 0, else ValueError naming the argument."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} = {value!r}: not a number; allowed: a finite number of seconds > 0")
+    value = float(value)
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} = {value!r} s: allowed: a finite number of seconds > 0")
+    return value
+
+
+def check_run(model: Model, end_time: float | None = None, output_interval: float | None = None,
+              names: tuple[str, str] = ("end_time", "output_interval")) -> tuple[float, float, float]:
+    """The stop time, output interval [s] and number of outputs of a run of ``model`` with these arguments (None:
+    the case's popbal.end_time / popbal.output_interval).
+
+    Refuses with ValueError an argument that is not a finite number > 0, and with settler.cases.CaseError a run
+    whose outputs or arrays exceed popbal.limits (MAX_OUTPUTS, memory_limit()). ``names`` name the two arguments in
+    the messages (the command line passes its options, ``--end-time`` and ``--output-interval``).
+    """
+    p = model.case.popbal
+    end_name, interval_name = names
+    if end_time is None:
+        end_name, end_value, stop = "popbal.end_time", p.end_time, model.stop_time
+    else:
+        end_value = _seconds(end_name, end_time)
+        stop = min(end_value, model.residence_time) if model.horizontal else end_value
+    if output_interval is None:
+        interval_name, interval = "popbal.output_interval", model.parameters["output_interval"]
+    else:
+        interval = _seconds(interval_name, output_interval)
+    outputs = limits.check_outputs(stop, interval, interval_name, end_name, end_value)
+    limits.check(model.cells, p.sections_per_doubling, model.grid.size, outputs, model.velocity_table.shape[1],
+                 model.parameters["speed_limit"].size > 0, interval_name, interval)
+    return stop, interval, outputs
+
+
 def run(model: Model | Case | str, end_time: float | None = None, output_interval: float | None = None,
         progress: bool | None = None, progress_interval: float = 2.0, stream=None, **overrides) -> Result:
     """Run the reduced model and return a :class:`Result`.
 
     model: a :class:`Model` from :func:`popbal.setup`, a case, or a preset name / path (then ``overrides`` as in
-    setup). end_time, output_interval [s] override popbal.end_time / popbal.output_interval. progress: True prints
+    setup). end_time, output_interval [s] override popbal.end_time / popbal.output_interval: finite numbers > 0
+    (else ValueError), and no more outputs or memory than :func:`check_run` allows (else CaseError). progress: True prints
     the start-up numbers and a progress line to ``stream`` (stderr) every progress_interval seconds of wall time;
     False prints nothing; None (default) starts the progress lines once a run has taken AUTO_PROGRESS_AFTER seconds,
     so short runs stay quiet and long ones report.
@@ -260,13 +299,7 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
     elif overrides:
         raise TypeError("run: overrides apply when a case is given; pass them to popbal.setup for a Model")
     p = model.parameters
-    stop = model.stop_time if end_time is None else (min(end_time, model.residence_time) if model.horizontal
-                                                      else end_time)
-    if not stop > 0.0:
-        raise ValueError(f"run: end_time = {end_time!r} s, allowed > 0")
-    interval = p["output_interval"] if output_interval is None else output_interval
-    if not interval > 0.0:
-        raise ValueError(f"run: output_interval = {output_interval!r} s, allowed > 0")
+    stop, interval, _ = check_run(model, end_time, output_interval)
     automatic = progress is None
     stream = stream or sys.stderr
     grid, cells, dz = model.grid, model.cells, model.cell_height

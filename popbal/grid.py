@@ -59,6 +59,16 @@ def diameter_of(volume):
     return np.cbrt(6.0 / math.pi * np.asarray(volume, dtype=float))
 
 
+def section_count(volume_min: float, volume_top: float, sections_per_doubling: int) -> int:
+    """Sections K of :func:`make_grid`'s grid from volume_min to volume_top [m^3], without building it.
+
+    The size checks (:mod:`popbal.limits`) call it before anything (K, K) is allocated.
+    """
+    ratio = 2.0 ** (1.0 / sections_per_doubling)
+    # the small tolerance keeps a volume_min that sits on a pivot from adding a needless section below it
+    return max(0, math.ceil(math.log(volume_top / volume_min) / math.log(ratio) - 1e-9)) + 1
+
+
 def make_grid(volume_min: float, volume_top: float, sections_per_doubling: int) -> SectionGrid:
     """Geometric pivots x_i = volume_top r^-(K-1-i), r = 2^(1/sections_per_doubling), down to x_0 <= volume_min.
 
@@ -70,8 +80,7 @@ def make_grid(volume_min: float, volume_top: float, sections_per_doubling: int) 
     if sections_per_doubling < 1:
         raise ValueError(f"make_grid: sections_per_doubling = {sections_per_doubling}, allowed >= 1")
     ratio = 2.0 ** (1.0 / sections_per_doubling)
-    # the small tolerance keeps a volume_min that sits on a pivot from adding a needless section below it
-    below = max(0, math.ceil(math.log(volume_top / volume_min) / math.log(ratio) - 1e-9))
+    below = section_count(volume_min, volume_top, sections_per_doubling) - 1
     pivots = volume_top * ratio ** -np.arange(below, -1, -1, dtype=float)
     pivots[-1] = volume_top
     edges = np.append(2.0 * pivots / (1.0 + ratio), 2.0 * ratio * pivots[-1] / (1.0 + ratio))

@@ -22,7 +22,7 @@ from settler.derived import Quantity, settling_velocity
 from settler.physics import (PROBABILITY_FORMS, STANDARD_GRAVITY, density_at_age, droplet_rate,
                              relative_diameter_at_age, scale_factor_pdf)
 
-from . import closures
+from . import closures, limits
 from .grid import SectionGrid, make_grid, split_to_pivots, volume_of
 from .kernels import COALESCENCE_RULES, merger_speed_limit
 
@@ -124,7 +124,9 @@ def build(case: Case) -> Model:
     # sections: original volumes from the smallest fed droplet to the largest a merger may make
     fed_diameters, fed_numbers = feed_points(case)
     top = volume_of(c.size_limit) if c.enabled else volume_of(fed_diameters.max())
-    grid = make_grid(float(volume_of(fed_diameters.min())), float(top), p.sections_per_doubling)
+    smallest = float(volume_of(fed_diameters.min()))
+    check_size(case, smallest, float(top))
+    grid = make_grid(smallest, float(top), p.sections_per_doubling)
     feed_number_rate = split_to_pivots(volume_of(fed_diameters), fed_numbers, grid.pivots)
 
     cells = p.height_cells
@@ -133,7 +135,7 @@ def build(case: Case) -> Model:
 
     # slag: residence time, and in 'vertical' flow a downflow that the outlet band withdraws
     slag_volume_rate = case.slag.feed_rate / case.slag.density
-    residence = box_area * g.height / slag_volume_rate if slag_volume_rate > 0.0 else math.inf
+    residence = residence_time(case)
     horizontal = p.slag_flow == "horizontal"
     faces = np.arange(cells + 1) * dz
     if horizontal or slag_volume_rate == 0.0:
@@ -161,7 +163,7 @@ def build(case: Case) -> Model:
     x0 = case.x_initial if reacting else math.nan
     xf = case.x_final if reacting else math.nan
     tau = case.reaction.time_constant
-    ages = np.arange(int(TABLE_SPAN * TABLE_PER_TAU) + 1) * (tau / TABLE_PER_TAU) if reacting else np.zeros(1)
+    ages = np.arange(velocity_table_ages(case)) * (tau / TABLE_PER_TAU) if reacting else np.zeros(1)
     table = np.empty((grid.size, ages.size))
     for m, age in enumerate(ages):
         if reacting:
@@ -174,7 +176,7 @@ def build(case: Case) -> Model:
 
     # 'step' rule with fixed droplet sizes: the approach speed below which a pair merges, once per pair
     speed_limit = np.empty((0, 0))
-    if c.enabled and p.coalescence_rule == "step" and not reacting:
+    if speed_table_needed(case):
         speed_limit = np.array([[merger_speed_limit(da, db, case.matte.density, case.slag.density,
                                                     case.matte.interfacial_tension, c.psi, c.virtual_mass,
                                                     PROBABILITY_FORMS[c.probability_form], c.threshold)
@@ -207,6 +209,37 @@ def build(case: Case) -> Model:
                  velocity_table=table, age_step=tau / TABLE_PER_TAU, residence_time=residence, stop_time=stop_time,
                  horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
                  viscosity=case.slag_viscosity, parameters=parameters)
+
+
+def check_size(case: Case, volume_min: float, volume_top: float) -> dict[str, float]:
+    """Refuse (CaseError) a case whose run would write more than limits.MAX_OUTPUTS outputs or whose arrays would
+    take more memory than limits.memory_limit(); called by :func:`build` before it allocates anything that scales.
+
+    Returns the estimate by part [bytes] (popbal.limits.estimate).
+    """
+    p = case.popbal
+    stop = min(p.end_time, residence_time(case)) if p.slag_flow == "horizontal" else p.end_time
+    outputs = limits.check_outputs(stop, p.output_interval, "popbal.output_interval", "popbal.end_time", p.end_time)
+    sections = limits.section_estimate(volume_min, volume_top, p.sections_per_doubling)
+    return limits.check(p.height_cells, p.sections_per_doubling, sections, outputs, velocity_table_ages(case),
+                        speed_table_needed(case), "popbal.output_interval", p.output_interval)
+
+
+def residence_time(case: Case) -> float:
+    """Slag residence time [s]: box slag volume / slag volume feed (inf without slag feed)."""
+    g = case.geometry
+    slag_volume_rate = case.slag.feed_rate / case.slag.density
+    return g.width * g.depth * g.height / slag_volume_rate if slag_volume_rate > 0.0 else math.inf
+
+
+def velocity_table_ages(case: Case) -> int:
+    """Columns M of the velocity table: ages 0 ... TABLE_SPAN time constants with reaction, else one."""
+    return int(TABLE_SPAN * TABLE_PER_TAU) + 1 if case.reaction.enabled else 1
+
+
+def speed_table_needed(case: Case) -> bool:
+    """Whether build tabulates merger_speed_limit per section pair ('step' rule, coalescence on, no reaction)."""
+    return bool(case.coalescence.enabled and case.popbal.coalescence_rule == "step" and not case.reaction.enabled)
 
 
 def feed_points(case: Case) -> tuple[np.ndarray, np.ndarray]:
