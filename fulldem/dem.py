@@ -905,6 +905,12 @@ class DemStepper:
         self._ready = False
 
     # -- set-up
+    @property
+    def ready(self) -> bool:
+        """Whether the work arrays and the neighbour list match the store (False before the first
+        :meth:`droplets_changed`)."""
+        return self._ready
+
     def droplets_changed(self) -> None:
         """Droplets were added or removed: grow work arrays, re-sort, rebuild the list and the forces."""
         store, n = self.store, self.store.count
@@ -916,6 +922,28 @@ class DemStepper:
             reorder_store(store, self.neighbours.spatial_order(store.position, store.diameter, n))
         droplet_masses(store.diameter, store.density, n, self.mass)
         self._build_list()
+        self._drag_set = False
+        self.compute_forces()
+        self._ready = True
+
+    def list_state(self) -> dict:
+        """The neighbour list and the travel bound since its build, for a checkpoint (see :meth:`restore_list`)."""
+        state = self.neighbours.state()
+        state["travel_bound"] = np.array([self._travel_bound])
+        return state
+
+    def restore_list(self, state: dict) -> None:
+        """Set up for the store's droplets with the list of :meth:`list_state` instead of a new build: the next
+        steps then see the same rows, hence sum the contact forces in the same order, as the run that saved it."""
+        store = self.store
+        if self.mass.shape[0] < store.capacity:
+            self.mass = np.zeros(store.capacity)
+            self.force = np.zeros((store.capacity, 3))
+            self.drag = np.zeros((store.capacity, 3))
+        droplet_masses(store.diameter, store.density, store.count, self.mass)
+        self.neighbours.restore(state)
+        self._travel_bound = float(state["travel_bound"][0])
+        self._refresh_damping()
         self._drag_set = False
         self.compute_forces()
         self._ready = True

@@ -531,6 +531,37 @@ class NeighbourList:
         self.last_travel = travel
         return travel > 0.5 * self.skin
 
+    def state(self) -> dict:
+        """The list and its layout as plain arrays and numbers, for a checkpoint: :meth:`restore` of it continues as
+        if the list had never been dropped (rows in the same order, the same skin, axis order and reference
+        positions), so a resumed run is bit-identical to an uninterrupted one."""
+        n = self.count
+        return {"start": self.start[: n + 1].copy(), "index": self.index[: int(self.start[n]) if n else 0].copy(),
+                "reference_position": self.reference_position[:n].copy(),
+                "reference_diameter": self.reference_diameter[:n].copy(), "axes": self.axes.copy(),
+                "cell_size": np.asarray(self.cell_size, dtype=float).copy(),
+                "shape": np.asarray(self.shape, dtype=np.int64).copy(),
+                "scalars": np.array([self.skin, n, self.builds, self.longest_row, self.longest_jump, self._stride],
+                                    dtype=float)}
+
+    def restore(self, state: dict) -> None:
+        """Take back a list saved by :meth:`state` (for the same droplets, in the same memory order)."""
+        skin, n, builds, longest_row, longest_jump, stride = state["scalars"]
+        n = int(n)
+        self.skin = float(skin)
+        self.count, self.builds = n, int(builds)
+        self.longest_row, self.longest_jump, self._stride = int(longest_row), int(longest_jump), int(stride)
+        self.start = np.asarray(state["start"], dtype=np.int64).copy()
+        self.index = _grow(self.index, max(int(self.start[n]) if n else 0, 1))
+        self.index[: state["index"].shape[0]] = state["index"]
+        self.reference_position = _grow(self.reference_position, n)
+        self.reference_diameter = _grow(self.reference_diameter, n)
+        self.reference_position[:n] = state["reference_position"]
+        self.reference_diameter[:n] = state["reference_diameter"]
+        self.axes = np.asarray(state["axes"], dtype=np.int64).copy()
+        self.cell_size = np.asarray(state["cell_size"], dtype=float).copy()
+        self.shape = np.asarray(state["shape"], dtype=np.int64).copy()
+
     def invalidate(self) -> None:
         """Force a rebuild at the next check (call after adding, removing or reordering droplets)."""
         self.builds = 0

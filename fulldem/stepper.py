@@ -441,8 +441,9 @@ class Simulation:
             # from their neighbours, which cuts the parallel slabs of the DEM kernels to one (fulldem.dem.slab_count)
             reorder_store(s, self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
             self._dem_stale = True
-        rebuilt = self._dem_stale
-        if self._dem_stale:  # one list build per step for this step's insertions, the last one's exits and a sort
+        # the DEM is set up at the first step even without droplets (a run may start empty and feed later)
+        rebuilt = self._dem_stale or not self.dem.ready
+        if rebuilt:  # one list build per step for this step's insertions, the last one's exits and a sort
             self.dem.droplets_changed()  # computes the contact forces at this state too
             self._dem_stale = False
         n = s.count
@@ -522,6 +523,10 @@ class Simulation:
         fluid = fl.total_momentum(self.grid, self.fluid, self.density, getattr(self, "momentum_eps", None))
         owed = np.array([float(np.sum(self.owed_force[a][fl._unique_faces(self.grid, a)])) for a in range(3)])
         return fluid + droplets + owed * self.dt * self.grid.cell_volume
+
+    def backlog_mass(self):
+        """Matte mass due by the feed schedule but waiting for room over the inlet [kg]."""
+        return float(self.case.matte.density * math.pi / 6.0 * np.sum(self.backlog**3))
 
     def mass_in_slag(self):
         s, n = self.store, self.store.count
