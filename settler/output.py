@@ -39,7 +39,19 @@ TIME_SERIES: dict[str, tuple[str, str]] = {
     "max_overlap_ratio": ("-", "largest contact overlap / smaller diameter (full engine; NaN in reduced)"),
     "wall_time": ("s", "wall-clock time the run has taken since t = 0, resumed runs included (full engine; NaN in "
                        "reduced): its slope over time is the wall time per simulated second"),
+    "feed_backlog": ("kg", "matte mass due by the feed schedule but not yet placed because the inlet layer was full "
+                           "(full engine; NaN in reduced): a growing backlog means the feed falls behind"),
 }
+
+#: Files a run of either engine writes into its output folder (plus the numbered snapshots of SNAPSHOT_PATTERNS):
+#: a folder holding any of them holds a run.
+RUN_FILES = ("case.toml", "metadata.json", "timeseries.csv", "timeseries.png", "summary.json", "checkpoint.npz",
+             "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz")
+SNAPSHOT_PATTERNS = ("droplets_*.vtu", "fluid_*.vtu")
+
+
+class OutputError(ValueError):
+    """An output folder that cannot be used; the message says why and what to do."""
 
 
 def time_series_frame(rows: list[dict] | dict[str, np.ndarray]) -> pd.DataFrame:
@@ -64,12 +76,23 @@ def mass_balance_error(fed, in_slag, settled, lost, reacted):
     return (fed - in_slag - settled - lost - reacted) / np.maximum(fed, 1e-300)
 
 
+def _file_mode() -> int:
+    """The mode a plain ``open`` would give a new file: 0666 less the process's umask."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then rename)."""
+    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then rename).
+
+    The file gets the permissions of an ordinary new file under the umask (a temporary file alone would be 0600,
+    readable by nobody else)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
+        os.fchmod(fd, _file_mode())
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             fh.flush()
@@ -97,6 +120,85 @@ def read_time_series(path: str | os.PathLike) -> pd.DataFrame:
     return pd.read_csv(path, comment="#")
 
 
+def json_safe(value):
+    """``value`` with every non-finite float (NaN, +-inf) replaced by None and NumPy scalars and arrays made plain,
+    so that strict JSON readers accept what :func:`to_json` writes (bare NaN and Infinity are not JSON)."""
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    return json_safe(float(value))
+
+
+def to_json(value, indent=1) -> str:
+    """Strict JSON text of ``value`` (non-finite numbers become null, see :func:`json_safe`)."""
+    return json.dumps(json_safe(value), indent=indent, allow_nan=False)
+
+
+def prepare_output_folder(path, *, overwrite=False, resume=False, option="--out", create=True) -> Path:
+    """Check and create a run's output folder; returns it as a Path. Raises :class:`OutputError`.
+
+    Refused: an empty name, a path that is a file (or a device such as /dev/null) or lies under one, a folder that
+    cannot be created or written, and -- unless ``resume`` (continue the run there) or ``overwrite`` (its run files,
+    :data:`RUN_FILES` and the snapshots, are deleted first; other files are left) -- a folder that holds another run.
+    ``create=False`` only checks (nothing is created or deleted), for a command that writes its outputs at the end.
+    """
+    if path is None or str(path).strip() == "":
+        raise OutputError(f"{option} {str(path)!r}: give the name of a folder to write the run into")
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{option} {out}: is a file, not a folder; give a folder (it is created if missing)")
+    above = next((p for p in out.parents if p.exists()), None)
+    if above is not None and not above.is_dir():
+        raise OutputError(f"{option} {out}: cannot create the folder: part of the path is a file ({above})")
+    if not create:
+        existing = run_files(out) if out.is_dir() else []
+        if existing and not (overwrite or resume):
+            raise OutputError(_occupied(option, out, existing))
+        return out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise OutputError(f"{option} {out}: cannot create the folder: part of the path is a file") from None
+    except OSError as exc:
+        raise OutputError(f"{option} {out}: cannot create the folder ({exc.strerror})") from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise OutputError(f"{option} {out}: the folder is not writable")
+    if resume:
+        return out
+    existing = run_files(out)
+    if existing and not overwrite:
+        raise OutputError(_occupied(option, out, existing))
+    for p in existing:
+        p.unlink()
+    return out
+
+
+def _occupied(option, out, existing) -> str:
+    shown = ", ".join(p.name for p in existing[:4]) + (f" and {len(existing) - 4} more" if len(existing) > 4 else "")
+    return (f"{option} {out}: the folder holds another run ({shown}); choose another folder, continue that run with "
+            "--resume (settler full), or give --overwrite to replace it")
+
+
+def run_files(folder) -> list[Path]:
+    """The run files (:data:`RUN_FILES` and numbered snapshots) present in ``folder``."""
+    folder = Path(folder)
+    found = [folder / name for name in RUN_FILES if (folder / name).is_file()]
+    for pattern in SNAPSHOT_PATTERNS:
+        found += sorted(folder.glob(pattern))
+    return found
+
+
 def write_run_metadata(out_dir: str | os.PathLike, case, engine: str, **extra) -> None:
     """Write ``case.toml`` (the resolved case) and ``metadata.json`` (engine, units, extra facts) into out_dir."""
     from . import __version__
@@ -106,4 +208,4 @@ def write_run_metadata(out_dir: str | os.PathLike, case, engine: str, **extra) -
     meta = {"engine": engine, "settler_version": __version__, "case_source": case.source,
             "time_series_units": {c: u for c, (u, _) in TIME_SERIES.items()},
             "time_series_columns": {c: d for c, (_, d) in TIME_SERIES.items()}, **extra}
-    atomic_write_text(out_dir / "metadata.json", json.dumps(meta, indent=1, default=float))
+    atomic_write_text(out_dir / "metadata.json", to_json(meta))
