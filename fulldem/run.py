@@ -14,31 +14,118 @@ Outputs in DIR (all written atomically):
   ``last_good.npz``, the state at the last time-series row before the failure (same format as a checkpoint).
 
 A run can start from a droplet list (CSV with columns x, y, z, diameter and optionally density; SI units; header
-line required) with the feed off: ``--droplets FILE --no-feed``.
+line required; see :mod:`fulldem.droplet_list`) with the feed off: ``--droplets FILE --no-feed``.
+
+Stopping and resuming. SIGINT (Ctrl-C) and SIGTERM (what a batch scheduler sends) end the step under way, write
+``checkpoint.npz`` and the time series, and stop the run with :class:`RunInterrupted` (the command exits 130 or 143
+and says how to resume); a second Ctrl-C stops at once, without a checkpoint. ``--resume`` continues from the
+checkpoint bit for bit, but only with the case it was written with: the checkpoint carries the resolved case, and
+any key that differs (other than the run-control keys of :data:`RUN_CONTROL_KEYS`) is refused by name.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+import os
+import signal
+import threading
 import time as _time
 from pathlib import Path
 
 import numba
 import numpy as np
-import pandas as pd
 
-from settler.output import (atomic_write_text, mass_balance_error, read_time_series, time_series_frame, write_run_metadata,
-                            write_time_series)
+from settler.cases import CaseError, load_case
+from settler.output import (OutputError, atomic_write_text, mass_balance_error, prepare_output_folder,
+                            read_time_series, time_series_frame, to_json, write_run_metadata, write_time_series)
 
 from . import fluid as fl
-from .droplets import DropletStore
-from .io import Progress, SnapshotWriter, load_checkpoint, save_checkpoint
+from .droplet_list import DropletListError, read_droplet_list
+from .droplets import FIELDS, DropletStore
+from .io import CheckpointError, Progress, SnapshotWriter, load_checkpoint, save_checkpoint
 from .stepper import Counters, Simulation
+
+#: Case keys that control how a run is carried out, not what it computes: they may differ between a checkpoint and
+#: the case that resumes it (section, key).
+RUN_CONTROL_KEYS = frozenset({("fulldem", "end_time"), ("fulldem", "output_interval"),
+                              ("fulldem", "snapshot_interval"), ("fulldem", "checkpoint_interval"),
+                              ("case", "description")})
+#: Fewest fluid cells along an axis (chosen: the pressure solver's and the coupling filter's stencils need a few
+#: cells; a grid coarser than this cannot resolve the flow around a droplet cloud anyway).
+MIN_CELLS = 4
+#: Memory a fluid cell costs in a coupled run [bytes]: BYTES_PER_CELL + BYTES_PER_CELL_THREAD per Numba thread (the
+#: coupling's deposit scratch, 7 doubles a node and thread). Measured 2026-12-01 on 2 threads: the peak resident
+#: memory of the demo case grows by 864-873 bytes per cell between 40^3, 80^3 and 100^3 grids (3 fed steps).
+BYTES_PER_CELL = 760
+BYTES_PER_CELL_THREAD = 56
+#: Fraction of the machine's memory a run's grid may take before it is refused.
+MEMORY_FRACTION = 0.7
 
 
 class RunError(RuntimeError):
     """A run that cannot start or continue; the message says why."""
+
+
+class RunInterrupted(RunError):
+    """The run was stopped by a signal after its state was saved; ``signal_number`` says which."""
+
+    def __init__(self, message, signal_number):
+        super().__init__(message)
+        self.signal_number = signal_number
+
+
+def _machine_memory() -> float:
+    """Physical memory of the machine [bytes] (inf where it cannot be read)."""
+    try:
+        return float(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return math.inf
+
+
+def check_case(case) -> None:
+    """Refuse, with :class:`settler.cases.CaseError`, a case the engine cannot run: a cell size that does not divide
+    the box into whole cubic cells, fewer than :data:`MIN_CELLS` cells along an axis, a grid too large for the
+    machine's memory, or a smoothing width the filtered kernel cannot have."""
+    g, fd = case.geometry, case.fulldem
+    edges = {"geometry.width": g.width, "geometry.depth": g.depth, "geometry.height": g.height}
+    counts = {k: v / fd.cell_size for k, v in edges.items()}
+    few = {k: c for k, c in counts.items() if c < MIN_CELLS - 1e-6}
+    if few:
+        k, c = next(iter(few.items()))
+        raise CaseError(f"fulldem.cell_size = {fd.cell_size:g} m: gives {c:.3g} cell(s) along {k} = {edges[k]:g} m; "
+                        f"allowed: at least {MIN_CELLS} cells per edge, cell_size <= {min(edges.values()) / MIN_CELLS:g} m")
+    uneven = [k for k, c in counts.items() if abs(c - round(c)) > 1e-6 * max(c, 1.0)]
+    if uneven:
+        edge_text = ", ".join(f"{k} = {v:g} m" for k, v in edges.items())
+        raise CaseError(f"fulldem.cell_size = {fd.cell_size:g} m: must divide every box edge into whole cubic cells "
+                        f"({edge_text}: {', '.join(f'{counts[k]:.4g} cells' for k in edges)}); allowed: "
+                        f"{_dividing_sizes(list(edges.values()), fd.cell_size)}")
+    cells = math.prod(round(c) for c in counts.values())
+    need = cells * (BYTES_PER_CELL + BYTES_PER_CELL_THREAD * numba.get_num_threads())
+    have = _machine_memory()
+    if need > MEMORY_FRACTION * have:
+        raise CaseError(f"fulldem.cell_size = {fd.cell_size:g} m: a grid of {' x '.join(str(round(c)) for c in counts.values())} "
+                        f"= {cells:.3g} cells needs about {need / 2**30:.3g} GiB, more than {MEMORY_FRACTION:.0%} of this "
+                        f"machine's {have / 2**30:.3g} GiB; allowed: a larger cell_size (at most "
+                        f"{MEMORY_FRACTION * have * cells / need:.3g} cells)")
+    if fd.kernel == "filtered" and fd.sigma_cells**2 <= 1.0 / 6.0 + 1e-12:
+        raise CaseError(f"fulldem.sigma_cells = {fd.sigma_cells:g}: the filtered kernel's trilinear step alone is "
+                        f"wider; allowed: sigma_cells > 1/sqrt(6) = {1 / math.sqrt(6):.4f}, or fulldem.kernel = 'direct'")
+
+
+def _dividing_sizes(edges, near) -> str:
+    """Cell sizes near ``near`` [m] that divide every edge into whole cells, as text."""
+    found = set()
+    for n in range(max(1, int(edges[0] / near) - 40), int(edges[0] / near) + 41):
+        h = edges[0] / n
+        if all(abs(e / h - round(e / h)) < 1e-9 * (e / h) for e in edges):
+            found.add(h)
+    best = sorted(found, key=lambda h: abs(h - near))[:3]
+    if not best:
+        return "a common divisor of the edges"
+    return "a common divisor of the edges, e.g. " + ", ".join(f"{h:.6g}" for h in sorted(best)) + " m"
 
 
 def _threading_layer():
@@ -47,25 +134,6 @@ def _threading_layer():
         return numba.threading_layer()
     except ValueError:
         return "not started"
-
-
-def read_droplet_list(path, default_density):
-    """Droplets from a CSV file with columns x, y, z, diameter [, density] (SI) -> DropletStore."""
-    try:
-        table = pd.read_csv(path, comment="#")
-    except (OSError, pd.errors.ParserError) as exc:
-        raise RunError(f"droplet list {path}: cannot read it as CSV ({exc})") from None
-    missing = [c for c in ("x", "y", "z", "diameter") if c not in table.columns]
-    if missing:
-        raise RunError(f"droplet list {path}: missing columns {missing}; required: x, y, z, diameter "
-                       "[, density] in SI units, with a header line")
-    if (table["diameter"] <= 0).any() or not np.isfinite(table[["x", "y", "z", "diameter"]].to_numpy()).all():
-        raise RunError(f"droplet list {path}: diameters must be positive and all values finite")
-    density = table["density"].to_numpy(float) if "density" in table else default_density
-    store = DropletStore(max(1024, 2 * len(table)))
-    if len(table):
-        store.add(table[["x", "y", "z"]].to_numpy(float), table["diameter"].to_numpy(float), density)
-    return store
 
 
 def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
@@ -98,12 +166,39 @@ def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
         "max_cfl": sim.last.get("max_cfl", math.nan),
         "max_overlap_ratio": sim.last.get("max_overlap_ratio", math.nan),
         "wall_time": wall_time,
+        "feed_backlog": sim.backlog_mass(),
     }
 
 
 # ------------------------------------------------------------------------------------------------ checkpoints
+def case_identity(case) -> dict:
+    """The resolved case without its run-control keys (:data:`RUN_CONTROL_KEYS`): what a checkpoint belongs to."""
+    return {section: {k: v for k, v in values.items() if (section, k) not in RUN_CONTROL_KEYS}
+            for section, values in case.to_dict().items()}
+
+
+def case_fingerprint(case) -> str:
+    """SHA-256 of :func:`case_identity` as canonical JSON: equal for cases that compute the same run."""
+    text = json.dumps(case_identity(case), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def case_differences(saved: dict, case) -> list[str]:
+    """``section.key: saved -> now`` for every key of :func:`case_identity` that differs between a saved identity
+    dict and ``case``."""
+    now = case_identity(case)
+    out = []
+    for section in sorted(set(saved) | set(now)):
+        a, b = saved.get(section, {}), now.get(section, {})
+        for key in sorted(set(a) | set(b)):
+            if a.get(key) != b.get(key):
+                out.append(f"{section}.{key}: checkpoint {a.get(key)!r}, now {b.get(key)!r}")
+    return out
+
+
 def checkpoint_state(sim: Simulation):
-    """(arrays, meta) that restore ``sim`` exactly (droplets, fluid, owed impulse, counters, random states)."""
+    """(arrays, meta) that restore ``sim`` exactly: every field of the droplet store (:data:`fulldem.droplets.FIELDS`),
+    the fluid, the owed impulse, the neighbour list, counters, random states and the case it belongs to."""
     arrays = {f"droplet_{k}": v for k, v in sim.store.state().items() if k != "next_ident"}
     arrays.update(u=sim.fluid.u, v=sim.fluid.v, w=sim.fluid.w, p=sim.fluid.p, backlog=sim.backlog,
                   feed_pending=sim.schedule._pending)
@@ -111,24 +206,34 @@ def checkpoint_state(sim: Simulation):
         arrays[f"owed_{a}"] = sim.owed_force[a]
         if sim.eps_old is not None:
             arrays[f"eps_old_{a}"] = sim.eps_old[a]
+    if sim.dem.ready:
+        arrays.update({f"list_{k}": v for k, v in sim.dem.list_state().items()})
     meta = {"time": sim.time, "steps": sim.steps, "next_ident": sim.store.next_ident,
-            "counters": vars(sim.counters), "initial_mass": sim.initial_mass,
+            "counters": vars(sim.counters), "initial_mass": sim.initial_mass, "dem_stale": sim._dem_stale,
             "schedule": {"fed_mass": sim.schedule.fed_mass, "time": sim.schedule.time,
                          "rng": sim.schedule._rng.bit_generator.state},
-            "rng": sim.rng.bit_generator.state}
+            "rng": sim.rng.bit_generator.state, "feed_on": bool(sim.feed_on),
+            "case": case_identity(sim.case), "case_fingerprint": case_fingerprint(sim.case)}
     return arrays, meta
 
 
 def restore_state(sim: Simulation, arrays, meta):
+    """Put ``sim`` (built for the same case) into the state of :func:`checkpoint_state`."""
     state = {k[len("droplet_"):]: v for k, v in arrays.items() if k.startswith("droplet_")}
+    missing = [name for name in FIELDS if name not in state]
+    if missing:
+        raise CheckpointError(f"the checkpoint has no droplet field(s) {missing}")
     state["next_ident"] = meta["next_ident"]
     restored = DropletStore.from_state(state)
     store = sim.store
     store.reserve(restored.capacity)
-    for name in ("position", "velocity", "diameter", "density", "original_diameter", "age", "flags", "partner",
-                 "ident"):
+    for name in FIELDS:
         getattr(store, name)[: restored.count] = getattr(restored, name)[: restored.count]
     store.count, store.next_ident = restored.count, restored.next_ident
+    shapes = {"u": sim.fluid.u.shape, "v": sim.fluid.v.shape, "w": sim.fluid.w.shape, "p": sim.fluid.p.shape}
+    wrong = {k: arrays[k].shape for k in shapes if arrays[k].shape != shapes[k]}
+    if wrong:
+        raise CheckpointError(f"its fluid arrays {wrong} do not fit this case's grid {sim.grid.shape}")
     sim.fluid = fl.FluidState(arrays["u"], arrays["v"], arrays["w"], arrays["p"])
     sim.owed_force = [arrays[f"owed_{a}"] for a in range(3)]
     sim.eps_old = [arrays[f"eps_old_{a}"] for a in range(3)] if "eps_old_0" in arrays else None
@@ -143,32 +248,119 @@ def restore_state(sim: Simulation, arrays, meta):
     sim.schedule._rng.bit_generator.state = sched["rng"]
     sim.rng.bit_generator.state = meta["rng"]
     sim._ensure_capacity()
-    sim.dem.droplets_changed()
+    listed = {k[len("list_"):]: v for k, v in arrays.items() if k.startswith("list_")}
+    if listed:  # the saved list: the next steps sum contact forces in the same order as the run that saved it
+        sim.dem.restore_list(listed)
+        sim._dem_stale = bool(meta.get("dem_stale", False))
+    else:  # a checkpoint of an older version: rebuild (resumes agree to round-off)
+        sim.dem.droplets_changed()
+
+
+def _read_checkpoint_for(case, checkpoint: Path, out: Path, log):
+    """Load ``checkpoint`` and refuse it unless it belongs to ``case``."""
+    try:
+        arrays, meta = load_checkpoint(checkpoint)
+    except CheckpointError as exc:
+        raise RunError(str(exc)) from None
+    saved = meta.get("case")
+    if saved is None:  # written before checkpoints carried their case: compare with the run's case.toml
+        try:
+            saved = case_identity(load_case(out / "case.toml"))
+        except (CaseError, OSError) as exc:
+            raise RunError(f"--resume: {checkpoint} records no case and {out / 'case.toml'} cannot be read ({exc}); "
+                           "start a new run") from None
+        log(f"note: {checkpoint} is from an older version and records no case; it was checked against "
+            f"{out / 'case.toml'}")
+    differences = case_differences(saved, case)
+    if differences:
+        raise RunError(f"--resume: the checkpoint in {out} belongs to another case; keys that differ: "
+                       + "; ".join(differences) + ". Resume with the run's own case (its case.toml), or start a new "
+                       "run in another folder")
+    return arrays, meta
+
+
+class _SignalCatcher:
+    """Within ``with``: SIGINT and SIGTERM only set ``caught`` (the run saves and stops after the step under way);
+    a second SIGINT raises KeyboardInterrupt at once. Outside the main thread it does nothing."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.caught = None
+        self._previous = {}
+
+    def _handle(self, signum, frame):
+        if self.caught is not None and signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        self.caught = signum
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in self.SIGNALS:
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        return False
 
 
 # ------------------------------------------------------------------------------------------------ the run
-def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=None, progress=True, log=print):
+def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=None, progress=True, log=print,
+             overwrite=False, command=None):
     """Run ``case`` into ``out_dir``; returns the time series (pandas DataFrame).
 
-    end_time [s] overrides fulldem.end_time; resume continues from out_dir/checkpoint.npz; droplets: a CSV path
-    (see :func:`read_droplet_list`) for the initial droplets; feed: force the feed on/off.
+    end_time [s] overrides fulldem.end_time; resume continues from out_dir/checkpoint.npz (only with the case it was
+    written with); droplets: a CSV path (see :func:`fulldem.droplet_list.read_droplet_list`) for the initial
+    droplets; feed: force the feed on/off; overwrite: replace another run's files in out_dir (else refused);
+    command: the command line, recorded in metadata.json. Raises :class:`RunError` (and :class:`RunInterrupted` on
+    SIGINT / SIGTERM, after saving a checkpoint) or :class:`settler.cases.CaseError`.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     fd = case.fulldem
     t_end = fd.end_time if end_time is None else float(end_time)
-    store = read_droplet_list(droplets, case.matte.density) if droplets else None
+    if not (math.isfinite(t_end) and t_end > 0.0):
+        raise RunError(f"end_time = {t_end!r} s: allowed: a finite number of seconds > 0")
+    if resume and droplets:
+        raise RunError("--droplets with --resume: a resumed run takes its droplets from the checkpoint; drop "
+                       "--droplets, or start a new run in another folder")
+    check_case(case)
+    if resume and str(out_dir).strip() and not (Path(out_dir) / "checkpoint.npz").is_file():
+        raise RunError(f"--resume: no checkpoint in {out_dir}; start without --resume")
+    try:
+        out = prepare_output_folder(out_dir, overwrite=overwrite, resume=resume)
+    except OutputError as exc:
+        raise RunError(str(exc)) from None
+    checkpoint = out / "checkpoint.npz"
+    loaded = _read_checkpoint_for(case, checkpoint, out, log) if resume else None
+    if loaded is not None:
+        if loaded[1].get("feed_on") is not None and feed is not None and bool(feed) != loaded[1]["feed_on"]:
+            raise RunError(f"--resume: the run in {out} was started with the feed {'on' if loaded[1]['feed_on'] else 'off'}; "
+                           "resume it the same way (--no-feed only if it was started with --no-feed)")
+        feed = loaded[1].get("feed_on", feed)
+        if t_end <= loaded[1]["time"] + 1e-12:
+            raise RunError(f"--end-time {t_end:g} s: the checkpoint in {out} is already at t = {loaded[1]['time']:.6g} s; "
+                           "allowed: a later end time")
+    store = None
+    if droplets:
+        try:
+            store = read_droplet_list(droplets, lower=(0.0, 0.0, 0.0),
+                                      upper=(case.geometry.width, case.geometry.depth, case.geometry.height),
+                                      slag_density=case.slag.density, default_density=case.matte.density,
+                                      overlap_limit=1.0)  # engulfed or coincident pairs never separate
+        except DropletListError as exc:
+            raise RunError(str(exc)) from None
     sim = Simulation(case, droplets=store, feed=feed)
     sim.initial_mass = sim.mass_in_slag()
     rows = []
     wall_before = 0.0  # wall-clock seconds spent before this process (by the runs this one resumes)
     snaps = SnapshotWriter(out, sim.grid)
-    checkpoint = out / "checkpoint.npz"
-    if resume:
-        if not checkpoint.exists():
-            raise RunError(f"--resume: no checkpoint in {out}; start without --resume")
-        arrays, meta = load_checkpoint(checkpoint)
-        restore_state(sim, arrays, meta)
+    if loaded is not None:
+        arrays, meta = loaded
+        try:
+            restore_state(sim, arrays, meta)
+        except (CheckpointError, KeyError, ValueError, TypeError) as exc:
+            raise RunError(f"--resume: {checkpoint} cannot be restored ({exc}); start a new run") from None
         series = out / "timeseries.csv"
         if series.exists():
             rows = [r for r in read_time_series(series).to_dict("records") if r["time"] <= sim.time + 1e-12]
@@ -182,7 +374,8 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
                "dem_step": sim.h, "dem_substeps": sim.substeps, "contact_stiffness_ref": sim.stiffness_ref,
                "slag_viscosity": sim.viscosity, "submodels_missing": ["coalescence", "reaction"],
                "numba_threads": numba.get_num_threads(), "numba_threading_layer": _threading_layer(),
-               "coupling_kernel": case.fulldem.kernel}
+               "coupling_kernel": case.fulldem.kernel, "case_fingerprint": case_fingerprint(case),
+               "feed_on": bool(sim.feed_on), "command": command}
     write_run_metadata(out, case, "fulldem", **startup)
     log(f"fulldem: grid {sim.grid.shape} of {sim.grid.spacing * 1e3:g} mm, fluid step {sim.dt:g} s, "
         f"DEM step {sim.h:.3g} s ({sim.substeps} per fluid step), contact stiffness {sim.stiffness_ref:.3g} N/m")
@@ -207,37 +400,52 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
             snaps.write(sim.time, sim.store, sim.fluid, np.ones(sim.grid.shape))
     good = checkpoint_state(sim)
     if progress:
-        log("fulldem: the first step compiles the Numba kernels where no cache exists yet (up to a minute)")
+        log("fulldem: the first step compiles the Numba kernels where no cache exists yet (up to a minute); "
+            "Ctrl-C saves a checkpoint and stops (continue with --resume)")
     bar = Progress(sim.time, t_end, enabled=progress)
     last_checkpoint = _time.perf_counter()
-    try:
-        while sim.time < t_end - 1e-9:
-            try:
-                sim.step()
-            except FloatingPointError as exc:
-                arrays, meta = good
-                save_checkpoint(out / "last_good.npz", arrays, meta)
-                write_time_series(time_series_frame(rows), out / "timeseries.csv")
-                raise RunError(f"numerical blow-up: {exc}. The state at t = {meta['time']:.6g} s was saved to "
-                               f"{out / 'last_good.npz'}; try a smaller fulldem.fluid_step or fulldem.dem_step, "
-                               "or a larger fulldem.max_overlap") from None
-            if sim.time >= next_row - 1e-9:
-                rows.append(time_series_row(sim, wall_time()))
-                write_time_series(time_series_frame(rows), out / "timeseries.csv")
-                good = checkpoint_state(sim)
-                next_row += fd.output_interval
-            if sim.time >= next_snap - 1e-9:
-                _, eps_cells = sim.void_fraction()
-                snaps.write(sim.time, sim.store, sim.fluid, eps_cells)
-                next_snap += fd.snapshot_interval
-            if _time.perf_counter() - last_checkpoint > fd.checkpoint_interval:
-                save_checkpoint_now()
-                last_checkpoint = _time.perf_counter()
-            bar.update(sim.time, sim.store.count,
-                       f"Re_cell {sim.last['max_cell_reynolds']:.3g}  CFL {sim.last['max_cfl']:.2g}  "
-                       f"overlap {sim.last['max_overlap_ratio']:.3g}")
-    finally:
-        bar.close()
+    backlog_warned = False
+    with _SignalCatcher() as signals:
+        try:
+            while sim.time < t_end - 1e-9:
+                try:
+                    sim.step()
+                except FloatingPointError as exc:
+                    arrays, meta = good
+                    save_checkpoint(out / "last_good.npz", arrays, meta)
+                    write_time_series(time_series_frame(rows), out / "timeseries.csv")
+                    raise RunError(f"numerical blow-up: {exc}. The state at t = {meta['time']:.6g} s was saved to "
+                                   f"{out / 'last_good.npz'}; try a smaller fulldem.fluid_step or fulldem.dem_step, "
+                                   "or a larger fulldem.max_overlap") from None
+                if sim.time >= next_row - 1e-9:
+                    rows.append(time_series_row(sim, wall_time()))
+                    write_time_series(time_series_frame(rows), out / "timeseries.csv")
+                    good = checkpoint_state(sim)
+                    next_row += fd.output_interval
+                    backlog = rows[-1]["feed_backlog"]
+                    if not backlog_warned and backlog > 0.01 * max(rows[-1]["mass_fed"], 1e-300):
+                        backlog_warned = True
+                        log(f"settler full: warning: the feed falls behind: {backlog:.3g} kg of matte due by "
+                            f"t = {sim.time:.4g} s waits for room over the inlet ({100 * backlog / rows[-1]['mass_fed']:.3g} % "
+                            "of the mass fed; column feed_backlog); the inlet layer cannot take feed.mass_rate = "
+                            f"{case.feed.mass_rate:g} kg/s (widen fulldem.insertion_layer or lower the rate)")
+                if sim.time >= next_snap - 1e-9:
+                    _, eps_cells = sim.void_fraction()
+                    snaps.write(sim.time, sim.store, sim.fluid, eps_cells)
+                    next_snap += fd.snapshot_interval
+                if signals.caught is not None:
+                    write_time_series(time_series_frame(rows), out / "timeseries.csv")
+                    save_checkpoint_now()
+                    name = signal.Signals(signals.caught).name
+                    raise RunInterrupted(f"interrupted by {name} at t = {sim.time:.6g} s; the state was saved to "
+                                         f"{checkpoint}. Continue with the same command plus --resume (same case, "
+                                         f"--out {out})", signals.caught)
+                if _time.perf_counter() - last_checkpoint > fd.checkpoint_interval:
+                    save_checkpoint_now()
+                    last_checkpoint = _time.perf_counter()
+                bar.update(sim.time, sim.store.count, _progress_extra(sim))
+        finally:
+            bar.close()
     if not rows or rows[-1]["time"] < sim.time - 1e-12:
         rows.append(time_series_row(sim, wall_time()))
     frame = time_series_frame(rows)
@@ -249,8 +457,19 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     plot_time_series(out, f"{case.case.name}: fulldem")
     plot_droplets(out / "droplets.png", sim.store.position[:n], sim.store.diameter[:n], sim.store.velocity[:n],
                   sim.lower, sim.upper, f"{case.case.name} at t = {sim.time:.3g} s: {n} droplets")
-    summary = {"end_time": sim.time, "steps": sim.steps, "droplets": sim.store.count, **vars(sim.counters)}
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
+    summary = {"end_time": sim.time, "steps": sim.steps, "droplets": sim.store.count, **vars(sim.counters),
+               "feed_backlog": sim.backlog_mass()}
+    atomic_write_text(out / "summary.json", to_json(summary))
     log(f"done: t = {sim.time:.6g} s, {sim.store.count} droplets in the slag; outputs in {out} "
         f"(timeseries.csv and timeseries.png, droplets.png, snapshots.pvd for ParaView, checkpoint.npz)")
     return frame
+
+
+def _progress_extra(sim) -> str:
+    """The progress line's diagnostics: cell Reynolds and CFL numbers, largest overlap, feed backlog if any."""
+    last = sim.last
+    text = (f"Re_cell {last['max_cell_reynolds']:.3g}  CFL {last['max_cfl']:.2g}  "
+            f"overlap {last['max_overlap_ratio']:.3g}")
+    if len(sim.backlog):
+        text += f"  backlog {sim.backlog_mass():.3g} kg"
+    return text

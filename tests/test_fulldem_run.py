@@ -64,7 +64,7 @@ def test_start_from_droplet_list(tmp_path):
     assert frame["mass_fed"].iloc[0] == pytest.approx(np.pi / 6 * (5000 * 1e-9 + 5100 * 1.5e-3**3), rel=1e-12)
     bad = tmp_path / "bad.csv"
     bad.write_text("x,y,diameter\n0.1,0.1,0.001\n")
-    with pytest.raises(RunError, match="missing columns \\['z'\\]"):
+    with pytest.raises(RunError, match="missing required column\\(s\\) z"):
         run_case(case, tmp_path / "out2", end_time=0.01, droplets=bad, feed=False, progress=False,
                  log=lambda *a: None)
 
