@@ -44,7 +44,9 @@ def main(args) -> int:
     except ValueError as exc:
         print(f"settler reduced: error: {exc}", file=sys.stderr)
         return 2
-    out = result.save(args.out)
+    from settler.output import prepare_output_folder
+
+    out = result.save(prepare_output_folder(args.out, overwrite=getattr(args, "overwrite", False)))
     last = result.timeseries.iloc[-1]
     fed = last["mass_fed"]
     share = (lambda m: f"{100 * m / fed:.3g} %") if fed > 0 else (lambda m: "-")

@@ -14,15 +14,16 @@ import math
 def seconds(option: str, *, minimum: float = 0.0, smallest: float | None = None):
     """An argparse ``type`` for a simulated time [s]: a finite number > ``minimum`` (and >= ``smallest`` if given).
 
-    ``option`` names the option in the message (``--end-time``)."""
+    argparse names the option in its message (``argument --end-time: -1: allowed: ...``); ``option`` is kept for
+    callers that check a value outside argparse."""
     def parse(text: str) -> float:
         allowed = f"a finite number of seconds > {minimum:g}" + (f" and >= {smallest:g}" if smallest else "")
         try:
             value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{option} {text!r}: not a number; allowed: {allowed}") from None
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number; allowed: {allowed}") from None
         if not math.isfinite(value) or value <= minimum or (smallest is not None and value < smallest):
-            raise argparse.ArgumentTypeError(f"{option} {text}: allowed: {allowed}")
+            raise argparse.ArgumentTypeError(f"{text}: allowed: {allowed}")
         return value
 
     parse.__name__ = "seconds"  # argparse names the type in some messages

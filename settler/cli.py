@@ -7,19 +7,33 @@ Subcommands register themselves in :data:`COMMANDS` (name -> (add_arguments, run
 from __future__ import annotations
 
 import argparse
-import json
+import shlex
 import sys
 
 from . import __version__
+from .arguments import seconds
 from .cases import SCHEMA, CaseError, list_presets, load_case
+from .output import OutputError, prepare_output_folder, to_json
 
-CASE_HELP = ("a preset name (" + ", ".join(list_presets()) + ") or a path to a case TOML file")
+def _case_help() -> str:
+    try:
+        names = ", ".join(list_presets())
+    except CaseError:  # a broken installation: the commands still start and say so when a case is loaded
+        names = "none found"
+    return f"a preset name ({names}) or a path to a case TOML file"
+
 OVERRIDE_HELP = "section.key=value overrides of the case, e.g. slag.viscosity_reference=0.3 coalescence.enabled=false"
 
 
 def _add_case_arguments(parser):
-    parser.add_argument("case", help=CASE_HELP)
-    parser.add_argument("overrides", nargs="*", metavar="section.key=value", help=OVERRIDE_HELP)
+    parser.add_argument("case", help=_case_help())
+    parser.add_argument("overrides", nargs="*", metavar="section.key=value",
+                        help=OVERRIDE_HELP + " (before or after the options)")
+
+
+def is_override(token: str) -> bool:
+    """Whether a command-line word is a ``section.key=value`` override (not an option)."""
+    return "=" in token and not token.startswith("-")
 
 
 # ---------------------------------------------------------------------------------------------------------- info
@@ -32,9 +46,10 @@ def _info(args) -> int:
     from .derived import as_records, derived_numbers, format_numbers
 
     case = load_case(args.case, args.overrides)
+    _warn_implausible(case, "info")
     numbers = derived_numbers(case)
     if args.json:
-        print(json.dumps({"case": case.to_dict(), "derived": as_records(numbers)}, indent=1))
+        print(to_json({"case": case.to_dict(), "derived": as_records(numbers)}))
     else:
         print(case.to_toml())
         print("# derived numbers")
@@ -76,38 +91,63 @@ def _reduced_arguments(parser):
 
     _add_case_arguments(parser)
     add_arguments(parser)
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the run files of another run in DIR (without it, such a folder is refused)")
 
 
 def _reduced(args) -> int:
     from popbal.cli import main as reduced_main
 
+    _warn_implausible(load_case(args.case, args.overrides), "reduced")
+    prepare_output_folder(args.out, overwrite=args.overwrite, create=False)  # refused before the run, created after
     return reduced_main(args)
 
 
 # ---------------------------------------------------------------------------------------------------------- full
 def _full_arguments(parser):
     _add_case_arguments(parser)
-    parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
-    parser.add_argument("--end-time", type=float, metavar="SECONDS",
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="output folder (created if missing; a folder holding another run is refused unless "
+                             "--overwrite or --resume is given)")
+    parser.add_argument("--end-time", type=seconds("--end-time"), metavar="SECONDS",
                         help="simulated time to stop at [s] (default: the case's fulldem.end_time)")
-    parser.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the run in DIR from its checkpoint.npz (written every "
+                             "fulldem.checkpoint_interval of wall time, at the end, and on Ctrl-C or SIGTERM); "
+                             "only with the same case")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the run files of another run in DIR (without it, such a folder is refused)")
     parser.add_argument("--droplets", metavar="CSV",
-                        help="initial droplets: CSV with columns x, y, z, diameter [, density] in SI units")
+                        help="initial droplets: CSV with a header line and columns x, y, z, diameter [, density] "
+                             "in SI units")
     parser.add_argument("--no-feed", action="store_true", help="switch the droplet feed off")
     parser.add_argument("--quiet", action="store_true", help="no progress line")
 
 
 def _full(args) -> int:
-    from fulldem.run import RunError, run_case
+    from fulldem.run import RunError, RunInterrupted, run_case
 
     case = load_case(args.case, args.overrides)
+    _warn_implausible(case, "full")
     try:
         run_case(case, args.out, end_time=args.end_time, resume=args.resume, droplets=args.droplets,
-                 feed=False if args.no_feed else None, progress=not args.quiet)
+                 feed=False if args.no_feed else None, progress=not args.quiet, overwrite=args.overwrite,
+                 command=args.command_line)
+    except RunInterrupted as exc:
+        print(f"settler full: {exc}", file=sys.stderr)
+        return 128 + exc.signal_number
     except RunError as exc:
         print(f"settler full: error: {exc}", file=sys.stderr)
         return 3
     return 0
+
+
+def _warn_implausible(case, command):
+    """Print the case's plausibility warnings (values far outside what the laws were made for) to stderr."""
+    from .derived import plausibility_warnings
+
+    for text in plausibility_warnings(case):
+        print(f"settler {command}: warning: {text}", file=sys.stderr)
 
 
 COMMANDS = {
@@ -118,24 +158,73 @@ COMMANDS = {
 }
 
 
+DEBUG_HELP = "show the Python traceback of an error instead of the one-line message"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="settler", description="Matte-droplet settling in copper flash-smelting settlers: CFD-DEM (full) and "
                                     "population-balance (reduced) models sharing one set of droplet physics.")
     parser.add_argument("--version", action="version", version=f"settler {__version__}")
+    parser.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (add_arguments, _, help_text) in COMMANDS.items():
-        add_arguments(sub.add_parser(name, help=help_text, description=help_text))
+        command = sub.add_parser(name, help=help_text, description=help_text)
+        add_arguments(command)
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
     return parser
 
 
+def parse(argv):
+    """Parse ``argv``; overrides (``section.key=value``) may come before or after the options."""
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    stray = [token for token in extra if not is_override(token) or not hasattr(args, "overrides")]
+    if stray:
+        parser.error("unrecognized arguments: " + " ".join(stray)
+                     + ("" if hasattr(args, "overrides") else f" ('settler {args.command}' takes no overrides)"))
+    if extra:
+        args.overrides = list(args.overrides) + extra
+    return args
+
+
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run the ``settler`` command; returns the exit status: 0 done, 2 refused input (case, option, output folder),
+    3 a run that failed, 128 + N stopped by signal N after saving (130 Ctrl-C, 143 SIGTERM), 1 an internal error."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parse(argv)
+    args.command_line = "settler " + " ".join(shlex.quote(a) for a in argv)
+    where = f"settler {args.command}"
     try:
         return COMMANDS[args.command][1](args)
-    except CaseError as exc:
-        print(f"settler {args.command}: error: {exc}", file=sys.stderr)
+    except (CaseError, OutputError) as exc:
+        if args.debug:
+            raise
+        print(f"{where}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print(f"{where}: interrupted (no checkpoint was written: the run had not started its steps, or a "
+              "second Ctrl-C stopped it at once)", file=sys.stderr)
+        return 130
+    except MemoryError:
+        if args.debug:
+            raise
+        print(f"{where}: error: out of memory; use a coarser grid or fewer outputs", file=sys.stderr)
+        return 3
+    except OSError as exc:
+        if args.debug:
+            raise
+        print(f"{where}: error: {exc.filename or ''}{': ' if exc.filename else ''}{exc.strerror or exc}",
+              file=sys.stderr)
+        return 3
+    except Exception as exc:  # a bug: say so in one line; --debug shows where
+        if args.debug:
+            raise
+        print(f"{where}: internal error: {type(exc).__name__}: {exc} (this is a bug in settler; please report it "
+              "with the command line; --debug shows the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -56,7 +56,7 @@ def test_command_line_errors_name_the_key(tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:  # argparse refuses the option (settler.arguments.seconds)
         main(["reduced", "simple", "--end-time", "0", "--out", str(tmp_path)])
     assert exit_info.value.code == 2
-    assert "--end-time 0" in capsys.readouterr().err
+    assert "argument --end-time: 0: allowed" in capsys.readouterr().err
 
 
 def test_progress_lines_on_request(capsys):
