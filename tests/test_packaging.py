@@ -118,3 +118,19 @@ def test_installed_full_run(installed):
                timeout=900)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     assert (out / "timeseries.csv").is_file()
+
+
+def test_every_dependency_is_imported():
+    """Each runtime dependency is imported by the toolkit's own code (the five Jupyter packages listed before issue
+    10 were not, and cost a new user 73 MB)."""
+    import re
+    import tomllib
+
+    modules = {"numpy": "numpy", "scipy": "scipy", "numba": "numba", "pandas": "pandas", "matplotlib": "matplotlib",
+               "cantera": "cantera", "meshio": "meshio", "tqdm": "tqdm"}
+    declared = [re.split(r"[<>=!~ \[]", d, maxsplit=1)[0]
+                for d in tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]]
+    source = "\n".join(p.read_text() for root in PACKAGE_ROOTS for p in (ROOT / root).rglob("*.py"))
+    unused = [d for d in declared
+              if not re.search(rf"^\s*(import|from)\s+{modules.get(d, d.replace('-', '_'))}\b", source, re.M)]
+    assert not unused, f"declared in pyproject.toml but never imported: {unused}"
