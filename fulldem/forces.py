@@ -19,12 +19,11 @@ import math
 from numba import njit, prange
 
 from .coupling import SELF_CORRECTION_CAP
-from settler.physics import di_felice_exponent, hadamard_rybczynski_factor, schiller_naumann_factor
-
-#: Drag-law codes for the kernels.
-DRAG_STOKES = 0
-DRAG_SCHILLER_NAUMANN = 1
-DRAG_LAWS = {"stokes": DRAG_STOKES, "schiller_naumann": DRAG_SCHILLER_NAUMANN}
+# The drag laws and hindrance corrections, their kernel codes and citations, are the shared registries of
+# settler.physics (name -> code); drag_factor and hindrance_factor switch on those codes.
+from settler.physics import (DRAG_LAWS, DRAG_SCHILLER_NAUMANN, DRAG_STOKES, HINDRANCE,  # noqa: F401
+                             HINDRANCE_DI_FELICE, HINDRANCE_NONE, drag_factor, hadamard_rybczynski_factor,
+                             hindrance_factor)
 
 #: Void fractions below this are clipped in the hindrance factor (a packed bed is about 0.36).
 EPS_FLOOR = 0.3
@@ -34,16 +33,16 @@ EPS_FLOOR = 0.3
 def drag_coefficient(diameter, slip, eps, density_fluid, viscosity, law, hindrance, viscosity_ratio):
     """Drag coefficient beta [kg/s] of one droplet (model A): F = beta (u - v).
 
-    diameter [m], slip |u - v| [m/s], eps void fraction around the droplet [-], law DRAG_STOKES or
-    DRAG_SCHILLER_NAUMANN, hindrance: apply Di Felice's eps^(-chi); viscosity_ratio mu_d/mu_f > 0 applies the
-    Hadamard-Rybczynski fluid-drop factor, 0 leaves rigid spheres.
+    diameter [m], slip |u - v| [m/s], eps void fraction around the droplet [-], law a code of DRAG_LAWS
+    (DRAG_STOKES, DRAG_SCHILLER_NAUMANN), hindrance a code of HINDRANCE (HINDRANCE_DI_FELICE applies Di Felice's
+    eps^(-chi); a bool works too: True is HINDRANCE_DI_FELICE); viscosity_ratio mu_d/mu_f > 0 applies the
+    Hadamard-Rybczynski fluid-drop factor, 0 leaves rigid spheres. settler.physics.terminal_velocity is the single
+    droplet's balance of this drag (eps = 1) against its buoyant weight.
     """
     e = max(eps, EPS_FLOOR)
     reynolds = density_fluid * e * slip * diameter / viscosity
-    f = 1.0 if law == DRAG_STOKES else schiller_naumann_factor(reynolds)
-    beta = 3.0 * math.pi * viscosity * diameter * f
-    if hindrance:
-        beta *= e ** (1.0 - di_felice_exponent(reynolds))
+    beta = 3.0 * math.pi * viscosity * diameter * drag_factor(reynolds, law)
+    beta *= hindrance_factor(e, reynolds, hindrance)
     if viscosity_ratio > 0.0:
         beta /= hadamard_rybczynski_factor(viscosity_ratio)
     return beta

@@ -16,10 +16,11 @@ Layers (imports point one way): :mod:`popbal.kernels` (compiled kernels) <- :mod
 :mod:`popbal.closures`; NumPy twins of the kernels: :mod:`popbal.reference`.
 """
 
+from settler.physics import COALESCENCE_RULES
+
 from .closures import CLOUD_COEFFICIENT, steady_channel_velocity
 from .driver import DISTRIBUTION_ARRAYS, Result, run
 from .grid import SectionGrid, make_grid
-from .kernels import COALESCENCE_RULES
 from .model import ZONES, Model, feed_points, setup
 
 __all__ = ["CLOUD_COEFFICIENT", "COALESCENCE_RULES", "DISTRIBUTION_ARRAYS", "Model", "Result", "SectionGrid", "ZONES",

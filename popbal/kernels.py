@@ -39,22 +39,16 @@ import math
 import numpy as np
 from numba import njit
 
-from settler.physics import (coalescence_probability, composition_from_masses, density_at_age, reacted_mass,
-                             reaction_age, relative_diameter_at_age, richardson_zaki_factor, species_masses)
+# The coalescence rules (registry, codes, and merger_efficiency, which applies a rule to seed Eq. 2) are shared with
+# the CFD-DEM engine, so they live in settler.physics; imported here under their old names.
+from settler.physics import (COALESCENCE_RULES, RULE_PROBABILITY, RULE_STEP, coalescence_probability,  # noqa: F401
+                             composition_from_masses, density_at_age, merger_efficiency, reacted_mass, reaction_age,
+                             relative_diameter_at_age, richardson_zaki_factor, species_masses)
 
 from .closures import cloud_velocity
 
 NUMBER, AGE, FES_REMOVED = 0, 1, 2
 QUANTITIES = 3
-
-#: Coalescence rules: how P_c (seed Eq. 2) turns a collision into a merger in the mean field. Registry name -> code.
-#: "step": a colliding pair merges iff P_c >= threshold -- the seed paper's DEM rule (50 % or more marks the pair)
-#: applied to the mean approach speed of the pair, so the reduced model and the full engine merge the same pairs.
-#: "probability": a colliding pair merges with probability P_c (threshold ignored) -- the film-drainage reading of
-#: Luo (1993) used by Fluent/OpenFOAM population balances.
-RULE_STEP = 0
-RULE_PROBABILITY = 1
-COALESCENCE_RULES = {"step": RULE_STEP, "probability": RULE_PROBABILITY}
 
 #: Cells, and sections within a cell, holding a matte volume fraction below this take no part in coalescence
 #: (rates ~ phi^2 are nil there) nor in the Courant limit of the time step [-].
@@ -207,17 +201,6 @@ def integrate_cell(content, pivots, target, loss_weight, beta, duration, max_rat
         t = duration if duration - t <= h else t + h
         steps += 1
     return steps
-
-
-@njit(cache=True)
-def merger_efficiency(diameter_a, diameter_b, approach_speed, density_droplet, density_slag, interfacial_tension,
-                      psi, virtual_mass, form, threshold, rule):
-    """Fraction of collisions at the given approach speed [m/s] that merge: seed Eq. 2 under ``rule`` [-]."""
-    p = coalescence_probability(diameter_a, diameter_b, approach_speed, density_droplet, density_slag,
-                                interfacial_tension, psi, virtual_mass, form)
-    if rule == RULE_STEP:
-        return 1.0 if p >= threshold else 0.0
-    return p
 
 
 @njit(cache=True)

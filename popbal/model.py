@@ -19,12 +19,12 @@ import numpy as np
 
 from settler.cases import Case, CaseError, load_case
 from settler.derived import Quantity, settling_velocity
-from settler.physics import (PROBABILITY_FORMS, STANDARD_GRAVITY, density_at_age, droplet_rate,
+from settler.physics import (COALESCENCE_RULES, PROBABILITY_FORMS, STANDARD_GRAVITY, density_at_age, droplet_rate,
                              relative_diameter_at_age, scale_factor_pdf)
 
 from . import closures, limits
 from .grid import SectionGrid, make_grid, split_to_pivots, volume_of
-from .kernels import COALESCENCE_RULES, merger_speed_limit
+from .kernels import merger_speed_limit
 
 ZONES = ("channel", "outer")
 CHANNEL, OUTER = 0, 1

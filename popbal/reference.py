@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from settler.physics import coalescence_probability_v
+from settler.physics import RULE_STEP, coalescence_probability_v
 
-from .kernels import NUMBER, RULE_STEP
+from .kernels import NUMBER
 
 
 def cell_average_rates(content, pivots, target, beta):

@@ -26,7 +26,9 @@ from typing import Any
 # DATA_DIR: folder of the property sets and case presets: the SETTLER_DATA environment variable, else the checkout's
 # data/, else the copy installed with the package (see settler.paths).
 from .paths import DATA_DIR, DATA_DIR_SOURCE
-from .physics import PROBABILITY_FORMS, cu2s_fraction_from_density, matte_density, slag_viscosity
+# The choices of the interchangeable models come from their registries, so a new model is added in one place.
+from .physics import (COALESCENCE_RULES, DRAG_LAWS, HINDRANCE, PROBABILITY_FORMS, cu2s_fraction_from_density,
+                      matte_density, slag_viscosity)
 
 
 class CaseError(ValueError):
@@ -113,7 +115,7 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                       optional=True),
     },
     "drag": {
-        "law": Field(S, "", "Single-droplet drag law.", choices=("stokes", "schiller_naumann")),
+        "law": Field(S, "", "Single-droplet drag law.", choices=DRAG_LAWS.names()),
         "fluid_drop": Field(B, "", "Apply the Hadamard-Rybczynski fluid-drop factor (off: rigid spheres, as the "
                                    "seed paper)."),
     },
@@ -121,7 +123,7 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "enabled": Field(B, "", "Coalescence submodel on or off."),
         "size_limit": Field(F, "m", "Largest droplet a coalescence may create.", 0.0, exclusive_minimum=True),
         "probability_form": Field(S, "", "Form of Eq. 2: seed paper's or Luo's square root.",
-                                  choices=tuple(PROBABILITY_FORMS)),
+                                  choices=PROBABILITY_FORMS.names()),
         "psi": Field(F, "-", "Order-of-unity constant Psi of Eq. 2.", 0.0),
         "virtual_mass": Field(F, "-", "Virtual-mass coefficient gamma of Eq. 2.", 0.0),
         "threshold": Field(F, "-", "A colliding pair coalesces when P_c >= threshold.", 0.0, 1.0),
@@ -164,7 +166,7 @@ SCHEMA: dict[str, dict[str, Field]] = {
                         "faster per coupled step at 130 000 droplets). Droplets wider than sigma_cells cells use "
                         "the direct kernel either way.",
                         choices=("filtered", "direct")),
-        "hindrance": Field(S, "", "Void-fraction correction of the drag.", choices=("di_felice", "none")),
+        "hindrance": Field(S, "", "Void-fraction correction of the drag.", choices=HINDRANCE.names()),
         "self_correction": Field(B, "", "Remove the droplet's own disturbance from the interpolated velocity."),
         "advection": Field(B, "", "Fluid inertia (advection) on; off gives unsteady Stokes flow."),
         "end_time": Field(F, "s", "Simulated time at which the run stops.", 0.0, exclusive_minimum=True),
@@ -194,7 +196,7 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                    0.0),
         "coalescence_rule": Field(S, "", "How P_c makes a collision a merger: 'step' (P_c >= coalescence.threshold, "
                                          "the DEM rule) or 'probability' (with probability P_c).",
-                                  choices=("step", "probability")),
+                                  choices=COALESCENCE_RULES.names()),
         "collision_efficiency": Field(F, "-", "Collision efficiency multiplying the collision frequency.", 0.0),
         "shear_coefficient": Field(F, "-", "Channel shear rate G in units of u_c / R_c (0: no shear collisions).",
                                    0.0),

@@ -13,10 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cases import Case
-from .physics import (FORM_LUO, FORM_SEED, coalescence_probability, droplet_rate, hadamard_rybczynski_factor,
-                      mean_droplet_mass, relaxation_time, relative_diameter, reynolds_number,
-                      schiller_naumann_velocity, scale_factor_moment, stokes_velocity,
-                              table_droplet_rate, weber_number)
+from .physics import (DRAG_LAWS, PROBABILITY_FORMS, coalescence_probability, droplet_rate, mean_droplet_mass,
+                      relaxation_time, relative_diameter, reynolds_number, scale_factor_moment, stokes_velocity,
+                      table_droplet_rate, terminal_velocity, terminal_velocity_v, weber_number)
 from .physics import matte_density as matte_density_law
 
 #: Richardson-Zaki exponent n (Richardson & Zaki 1954) used for the hindered estimate.
@@ -38,16 +37,19 @@ class Quantity:
 
 
 def settling_velocity(case: Case, diameter, density=None):
-    """Terminal settling velocity of a single droplet in the case's slag with the case's drag law [m/s]."""
+    """Terminal settling velocity of a single droplet in the case's slag with the case's drag law [m/s].
+
+    The case-level form of :func:`settler.physics.terminal_velocity`, the one dispatch on ``drag.law`` and
+    ``drag.fluid_drop`` that both engines use (popbal's velocity table, fulldem's ``Simulation.terminal_velocity``).
+    diameter [m] and density [kg/m^3, default the fed matte's]: floats, or arrays that broadcast.
+    """
     rho = case.matte.density if density is None else density
     mu = case.slag_viscosity
-    if case.drag.law == "stokes":
-        v = stokes_velocity(diameter, rho, case.slag.density, mu)
-    else:
-        v = schiller_naumann_velocity(diameter, rho, case.slag.density, mu)
-    if case.drag.fluid_drop:
-        v *= hadamard_rybczynski_factor(case.matte.viscosity / mu)
-    return v
+    law = DRAG_LAWS[case.drag.law]
+    ratio = case.matte.viscosity / mu if case.drag.fluid_drop else 0.0
+    if np.ndim(diameter) or np.ndim(rho):
+        return terminal_velocity_v(diameter, rho, case.slag.density, mu, law, ratio)
+    return terminal_velocity(diameter, rho, case.slag.density, mu, law, ratio)
 
 
 @dataclass(frozen=True)
@@ -175,7 +177,7 @@ def _derived_numbers(case: Case) -> dict[str, list[Quantity]]:
 
     sigma = m.interfacial_tension
     c = case.coalescence
-    form = FORM_LUO if c.probability_form == "luo" else FORM_SEED
+    form = PROBABILITY_FORMS[c.probability_form]
     d_small, d_mean, d_large = sizes["smallest fed"], sizes["mean fed"], sizes["largest fed"]
     pairs = [
         ("smallest on largest fed, differential settling", d_small, d_large,

@@ -4,6 +4,10 @@ The laws are scalar ``@njit(cache=True)`` functions of floats (SI units) so that
 (:mod:`fulldem`) and the population balance (:mod:`popbal`) call literally the same code. For NumPy users each law
 also has a broadcasting twin with the suffix ``_v`` (a Numba ufunc built from the same Python source).
 
+Interchangeable models are listed in registries (:mod:`settler.physics.registry`: name -> kernel code, with a
+description and a citation per entry): :data:`DRAG_LAWS`, :data:`HINDRANCE`, :data:`PROBABILITY_FORMS`,
+:data:`COALESCENCE_RULES`. The case schema takes its allowed values from them and the tests loop over them.
+
 Why a package of its own: ``fulldem`` and ``popbal`` must not import each other (the reduced model has to install and
 run without the CFD-DEM engine and vice versa), so the laws they share sit one layer below both, in
 ``settler.physics``, beside the case files and the command line that both engines also share.
@@ -15,17 +19,21 @@ import inspect
 import numba
 import numpy as np
 
-from .coalescence import (FORM_LUO, FORM_SEED, PROBABILITY_FORMS, coalescence_probability, merged_diameter,
-                          weber_number)
+from .coalescence import (COALESCENCE_RULES, FORM_LUO, FORM_SEED, PROBABILITY_FORMS, RULE_PROBABILITY, RULE_STEP,
+                          coalescence_probability, collision_merges, merged_diameter, merger_efficiency,
+                          merger_fraction, weber_number)
 from .constants import GAS_CONSTANT, MOLAR_MASS_CU, MOLAR_MASS_CU2S, MOLAR_MASS_FES, STANDARD_GRAVITY
 from .feed import (FeedSchedule, droplet_rate, mean_droplet_mass, sample_scale_factors, scale_factor_moment,
                    scale_factor_pdf, table_droplet_rate)
 from .matte import (composition_from_masses, cu2s_fraction_from_density, cu2s_mass_fraction, density_at_age,
                     diameter_from_masses, matte_density, molar_mass_matte, reacted_mass, reaction_age,
                     reaction_fraction, relative_diameter, relative_diameter_at_age, relative_volume, species_masses)
-from .settling import (di_felice_exponent, haberman_sayre_factor, hadamard_rybczynski_factor, relaxation_time,
-                       reynolds_number, richardson_zaki_factor, schiller_naumann_factor, schiller_naumann_velocity,
-                       square_duct_factor, stokes_velocity)
+from .registry import Entry, Registry
+from .settling import (DRAG_LAWS, DRAG_SCHILLER_NAUMANN, DRAG_STOKES, HINDRANCE, HINDRANCE_DI_FELICE, HINDRANCE_NONE,
+                       di_felice_exponent, drag_factor, haberman_sayre_factor, hadamard_rybczynski_factor,
+                       hindrance_factor, relaxation_time, reynolds_number, richardson_zaki_factor,
+                       schiller_naumann_factor, schiller_naumann_velocity, square_duct_factor, stokes_velocity,
+                       terminal_velocity)
 from .slag import slag_viscosity
 
 
@@ -54,6 +62,7 @@ relaxation_time_v = vectorize(relaxation_time)
 reynolds_number_v = vectorize(reynolds_number)
 schiller_naumann_factor_v = vectorize(schiller_naumann_factor)
 schiller_naumann_velocity_v = vectorize(schiller_naumann_velocity)
+terminal_velocity_v = vectorize(terminal_velocity)
 hadamard_rybczynski_factor_v = vectorize(hadamard_rybczynski_factor)
 haberman_sayre_factor_v = vectorize(haberman_sayre_factor)
 square_duct_factor_v = vectorize(square_duct_factor)

@@ -11,18 +11,47 @@ after Wang, Wang & Jin, Chem. Eng. Sci. 60 (2005) 6199, who follow Luo (1993). T
 Convention for i and j: droplet *i is the smaller one*, so xi = d_i/d_j <= 1 and We = rho_c d_i u_ij^2 / sigma uses
 the smaller diameter. The functions order their arguments themselves, so P_c(a, b) = P_c(b, a). The 0.75 sits
 *inside* the square root (OpenQBMM puts it outside, an exponent 1.155x too small).
+
+How P_c turns a collision into a merger is the *coalescence rule* (:data:`COALESCENCE_RULES`), applied by
+:func:`merger_fraction` (the mean fraction of collisions that merge, for the population balance) and
+:func:`collision_merges` (one collision's outcome from a uniform random number, for the DEM); the two agree in
+expectation, so both engines merge by the same rule.
 """
 
 import math
 
 from numba import njit
 
+from .registry import Entry, Registry
+
 #: Form code for D = rho_d/rho_c + gamma (seed paper Eq. 2).
 FORM_SEED = 0
 #: Form code for D = sqrt(rho_d/rho_c + gamma) (Luo 1993).
 FORM_LUO = 1
-#: Registry of the coalescence-probability forms: name -> code passed to the kernels.
-PROBABILITY_FORMS = {"seed": FORM_SEED, "luo": FORM_LUO}
+#: Coalescence-probability forms: name (case key coalescence.probability_form) -> code of coalescence_probability.
+PROBABILITY_FORMS = Registry(
+    "probability form",
+    Entry("seed", FORM_SEED, "Eq. 2 as typeset in the seed paper: D = rho_d/rho_c + gamma.",
+          "Jylha & Jokilaakso 2023, Heliyon 9, e21570, Eq. 2; after Wang, Wang & Jin 2005, Chem. Eng. Sci. 60, 6199"),
+    Entry("luo", FORM_LUO, "Luo's original film-drainage form: D = sqrt(rho_d/rho_c + gamma).",
+          "Luo 1993, Dr. ing. thesis, Norwegian Institute of Technology, Trondheim"),
+)
+
+#: Rule code: a colliding pair merges iff P_c >= threshold.
+RULE_STEP = 0
+#: Rule code: a colliding pair merges with probability P_c (threshold ignored).
+RULE_PROBABILITY = 1
+#: Coalescence rules: how P_c makes a collision a merger; name (case key popbal.coalescence_rule) -> code of
+#: merger_fraction / collision_merges. "step" applied to the mean approach speed of a pair in the population balance
+#: merges the same pairs as the DEM; "probability" is the film-drainage reading used by Fluent/OpenFOAM population
+#: balances.
+COALESCENCE_RULES = Registry(
+    "coalescence rule",
+    Entry("step", RULE_STEP, "A colliding pair merges iff P_c >= coalescence.threshold (the DEM rule).",
+          "Jylha & Jokilaakso 2023, Heliyon 9, e21570, section 3.3.1"),
+    Entry("probability", RULE_PROBABILITY, "A colliding pair merges with probability P_c.",
+          "Luo 1993, Dr. ing. thesis, Norwegian Institute of Technology, Trondheim"),
+)
 
 
 @njit(cache=True)
@@ -52,6 +81,42 @@ def coalescence_probability(diameter_a, diameter_b, relative_speed, density_drop
     shape = math.sqrt(0.75 * (1.0 + xi * xi) * (1.0 + xi * xi * xi)) / (ratio * one_xi * one_xi * one_xi)
     we = weber_number(d_i, relative_speed, density_continuous, interfacial_tension)
     return math.exp(-psi * shape * math.sqrt(we))
+
+
+@njit(cache=True)
+def merger_fraction(probability, threshold, rule):
+    """Mean fraction of collisions with coalescence probability P_c that merge under ``rule`` [-].
+
+    RULE_STEP: 1 if P_c >= threshold else 0; RULE_PROBABILITY: P_c (threshold unused). The expectation of
+    :func:`collision_merges` over a uniform random number.
+    """
+    if rule == RULE_STEP:
+        return 1.0 if probability >= threshold else 0.0
+    return probability
+
+
+@njit(cache=True)
+def collision_merges(probability, threshold, rule, uniform):
+    """Whether one collision with coalescence probability P_c merges under ``rule``, given uniform in [0, 1).
+
+    RULE_STEP: P_c >= threshold (uniform unused); RULE_PROBABILITY: uniform < P_c.
+    """
+    if rule == RULE_STEP:
+        return probability >= threshold
+    return uniform < probability
+
+
+@njit(cache=True)
+def merger_efficiency(diameter_a, diameter_b, approach_speed, density_droplet, density_slag, interfacial_tension,
+                      psi, virtual_mass, form, threshold, rule):
+    """Fraction of collisions at the given approach speed [m/s] that merge: seed Eq. 2 under ``rule`` [-].
+
+    diameters [m], densities [kg/m^3], interfacial_tension [N/m]; psi, virtual_mass, form as in
+    :func:`coalescence_probability`; threshold and rule as in :func:`merger_fraction`.
+    """
+    p = coalescence_probability(diameter_a, diameter_b, approach_speed, density_droplet, density_slag,
+                                interfacial_tension, psi, virtual_mass, form)
+    return merger_fraction(p, threshold, rule)
 
 
 @njit(cache=True)

@@ -6,6 +6,9 @@ are made by :func:`settler.physics.vectorize` and carry the suffix ``_v``.
 
 Sign convention: velocities are *settling* velocities, positive downwards when the droplet is denser than the
 fluid.
+
+Registries (:class:`settler.physics.registry.Registry`, name -> kernel code): :data:`DRAG_LAWS`, switched on by
+:func:`drag_factor` and :func:`terminal_velocity`, and :data:`HINDRANCE`, switched on by :func:`hindrance_factor`.
 """
 
 import math
@@ -13,6 +16,36 @@ import math
 from numba import njit
 
 from .constants import STANDARD_GRAVITY
+from .registry import Entry, Registry
+
+#: Drag-law code: Stokes drag, f = 1.
+DRAG_STOKES = 0
+#: Drag-law code: Schiller-Naumann drag, f = 1 + 0.15 Re^0.687.
+DRAG_SCHILLER_NAUMANN = 1
+#: Single-droplet drag laws: name (case key drag.law) -> code of :func:`drag_factor`.
+DRAG_LAWS = Registry(
+    "drag law",
+    Entry("stokes", DRAG_STOKES, "Creeping-flow drag of a rigid sphere, F = 3 pi mu d u (f = 1).",
+          "Stokes 1851, Trans. Camb. Philos. Soc. 9, 8"),
+    Entry("schiller_naumann", DRAG_SCHILLER_NAUMANN,
+          "Finite-Re drag, f = C_D Re/24 = 1 + 0.15 Re^0.687 (Re <= 1000), C_D = 0.44 above.",
+          "Schiller & Naumann 1933, Z. Ver. Dtsch. Ing. 77, 318"),
+)
+
+#: Hindrance code: no void-fraction correction.
+HINDRANCE_NONE = 0
+#: Hindrance code: Di Felice's voidage function (model A: beta x eps^(1 - chi)).
+HINDRANCE_DI_FELICE = 1
+#: Void-fraction corrections of the drag: name (case key fulldem.hindrance) -> code of :func:`hindrance_factor`.
+#: HINDRANCE_DI_FELICE is 1 and HINDRANCE_NONE 0, so a bool "hindrance on" selects the same law.
+HINDRANCE = Registry(
+    "hindrance",
+    Entry("di_felice", HINDRANCE_DI_FELICE,
+          "Voidage function eps^-chi, chi = 3.7 - 0.65 exp(-(1.5 - log10 Re)^2 / 2); model A: beta x eps^(1 - chi).",
+          "Di Felice 1994, Int. J. Multiphase Flow 20, 153"),
+    Entry("none", HINDRANCE_NONE, "No void-fraction correction: single-droplet drag at every void fraction.",
+          "none needed: the dilute limit eps -> 1 of any voidage function"),
+)
 
 
 @njit(cache=True)
@@ -49,6 +82,17 @@ def schiller_naumann_factor(reynolds):
 
 
 @njit(cache=True)
+def drag_factor(reynolds, law):
+    """Drag correction f = C_D Re / 24 of the drag law with code ``law`` (:data:`DRAG_LAWS`) [-].
+
+    Drag force F = 3 pi mu d f(Re) u_rel. DRAG_STOKES gives 1; any other code Schiller-Naumann.
+    """
+    if law == DRAG_STOKES:
+        return 1.0
+    return schiller_naumann_factor(reynolds)
+
+
+@njit(cache=True)
 def schiller_naumann_velocity(diameter, density_droplet, density_fluid, viscosity, gravity=STANDARD_GRAVITY):
     """Terminal velocity with Schiller-Naumann drag, solved from v f(Re(v)) = v_Stokes [m/s].
 
@@ -82,6 +126,23 @@ def schiller_naumann_velocity(diameter, density_droplet, density_fluid, viscosit
             break
         v = v_new
     return math.copysign(v, v_stokes)
+
+
+@njit(cache=True)
+def terminal_velocity(diameter, density_droplet, density_fluid, viscosity, law, viscosity_ratio=0.0,
+                      gravity=STANDARD_GRAVITY):
+    """Terminal settling velocity of a single droplet with the drag law of code ``law`` (:data:`DRAG_LAWS`) [m/s].
+
+    diameter [m], densities [kg/m^3], viscosity of the fluid [Pa s], viscosity_ratio lam = mu_droplet / mu_fluid:
+    lam > 0 divides the drag by the Hadamard-Rybczynski factor (a clean fluid drop), exactly as
+    :func:`fulldem.forces.drag_coefficient` applies it; 0 leaves a rigid sphere. The drop then settles where
+    v f(Re(v)) = HR(lam) v_Stokes, i.e. at the law's velocity under gravity HR(lam) g: HR x the rigid velocity at
+    Re -> 0, a little less at finite Re (f grows with v). Single droplet: void fraction 1, no hindrance.
+    """
+    speedup = hadamard_rybczynski_factor(viscosity_ratio) if viscosity_ratio > 0.0 else 1.0
+    if law == DRAG_STOKES:
+        return stokes_velocity(diameter, density_droplet, density_fluid, viscosity, gravity) * speedup
+    return schiller_naumann_velocity(diameter, density_droplet, density_fluid, viscosity, gravity * speedup)
 
 
 @njit(cache=True)
@@ -130,3 +191,16 @@ def di_felice_exponent(reynolds):
     r = max(reynolds, 1e-12)
     t = 1.5 - math.log10(r)
     return 3.7 - 0.65 * math.exp(-0.5 * t * t)
+
+
+@njit(cache=True)
+def hindrance_factor(void_fraction, reynolds, hindrance):
+    """Factor on the drag coefficient beta of model A for the hindrance of code ``hindrance`` (:data:`HINDRANCE`) [-].
+
+    HINDRANCE_DI_FELICE: eps^(1 - chi(Re)) -- Di Felice's eps^-chi on a drag written with the superficial slip
+    eps |u - v| (Zhou et al. 2010, J. Fluid Mech. 661, 482, model A; see :mod:`fulldem.forces`); HINDRANCE_NONE: 1.
+    Both give 1 at void_fraction = 1. reynolds: Re = rho eps |u - v| d / mu.
+    """
+    if hindrance == HINDRANCE_DI_FELICE:
+        return void_fraction ** (1.0 - di_felice_exponent(reynolds))
+    return 1.0
