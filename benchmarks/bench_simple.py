@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numba
 
-from fulldem.run import run_case
+from fulldem.driver import run_case
 from settler.cases import load_case
 from settler.output import read_time_series
 

@@ -1,5 +1,11 @@
 """fulldem: the coupled CFD-DEM engine (slag on a grid, every matte droplet a soft sphere).
 
+Python API (:mod:`fulldem.api`)::
+
+    setup = fulldem.setup("demo", fulldem__end_time=2.0)    # a validated case; overrides as section__key=value
+    result = fulldem.run(setup, out="runs/demo")            # runs it into a folder; result.timeseries, .droplets()
+    result = fulldem.load("runs/demo")                      # a finished (or stopped) run's results
+
 The droplet laws it uses live in :mod:`settler.physics`.
 
 Threading layer. Numba's default order is TBB, then OpenMP, then its own workqueue. With the TBB library of
@@ -27,3 +33,9 @@ if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY
     # processes; the config attribute takes effect even when every kernel comes from the cache
     os.environ["NUMBA_THREADING_LAYER_PRIORITY"] = " ".join(THREADING_LAYER_PRIORITY)
     numba.config.THREADING_LAYER_PRIORITY = list(THREADING_LAYER_PRIORITY)
+
+# The Python API (see fulldem.api): setup a case, run it into a folder, load a run's results.
+from .api import Result, Setup, load, run, setup  # noqa: E402 (after the threading layer is chosen)
+from .driver import RunError, RunInterrupted  # noqa: E402
+
+__all__ = ["Result", "RunError", "RunInterrupted", "Setup", "THREADING_LAYER_PRIORITY", "load", "run", "setup"]

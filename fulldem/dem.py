@@ -48,7 +48,7 @@ from numba import njit, prange
 
 from . import contacts
 from .droplets import COALESCING
-from .neighbours import NeighbourList, permute_rows, reorder_store, wrap_positions
+from .neighbours import NeighbourList, permute_rows, wrap_positions
 
 #: LLVM fast-math flags of the hot kernels: fused multiply-add and reciprocal; no reassociation (the pair forces
 #: stay exactly antisymmetric, so momentum is conserved to round-off) and no assumption that values are finite.
@@ -902,14 +902,18 @@ class DemStepper:
         self.steps = 0
         self._travel_bound = 0.0
         self._drag_set = False
-        self._ready = False
+        self._seen_version = -1  # the store's version when the list and work arrays were last set up
 
     # -- set-up
     @property
     def ready(self) -> bool:
-        """Whether the work arrays and the neighbour list match the store (False before the first
-        :meth:`droplets_changed`)."""
-        return self._ready
+        """Whether the work arrays and the neighbour list match the store: False before the first
+        :meth:`droplets_changed` and whenever the store's version moved since (droplets added, removed, reordered)."""
+        return self._seen_version == self.store.version
+
+    def invalidate(self) -> None:
+        """Set up anew (:meth:`droplets_changed`) at the next step even if the store did not change."""
+        self._seen_version = -1
 
     def droplets_changed(self) -> None:
         """Droplets were added or removed: grow work arrays, re-sort, rebuild the list and the forces."""
@@ -919,12 +923,12 @@ class DemStepper:
             self.force = np.zeros((store.capacity, 3))
             self.drag = np.zeros((store.capacity, 3))
         if self.sort_on_rebuild and n:
-            reorder_store(store, self.neighbours.spatial_order(store.position, store.diameter, n))
+            store.reorder(self.neighbours.spatial_order(store.position, store.diameter, n))
         droplet_masses(store.diameter, store.density, n, self.mass)
         self._build_list()
         self._drag_set = False
         self.compute_forces()
-        self._ready = True
+        self._seen_version = store.version
 
     def list_state(self) -> dict:
         """The neighbour list and the travel bound since its build, for a checkpoint (see :meth:`restore_list`)."""
@@ -946,7 +950,7 @@ class DemStepper:
         self._refresh_damping()
         self._drag_set = False
         self.compute_forces()
-        self._ready = True
+        self._seen_version = store.version
 
     def sizes_changed(self) -> None:
         """Diameters or densities changed in place: new masses, and an exact list check at the next step."""
@@ -1018,7 +1022,7 @@ class DemStepper:
         do not depend on the thread count (the timed choice splits the advance into segments, which changes them at
         round-off: fused multiply-adds fall differently at segment ends).
         """
-        if not self._ready:
+        if not self.ready:
             self.droplets_changed()
         if not self._drag_set:
             raise RuntimeError("dem: call set_drag(beta) after droplets_changed() / sizes_changed()")
@@ -1098,7 +1102,8 @@ class DemStepper:
         if nl.needs_rebuild(s.position, s.diameter, n):
             if self.sort_on_rebuild:
                 new = nl.spatial_order(s.position, s.diameter, n)
-                reorder_store(s, new)
+                s.reorder(new)
+                self._seen_version = s.version  # this stepper re-sorted its own arrays with the store
                 for arr in (self.mass, self.drag, self.force, impulse) + (
                         (fluid_velocity,) if len(fluid_velocity) > 1 else ()):
                     if len(arr) >= n:

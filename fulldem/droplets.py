@@ -1,7 +1,15 @@
-"""Droplet state as a struct of arrays with capacity that grows by doubling.
+"""Droplet state as a struct of arrays with capacity that grows by doubling: the one owner of the droplets.
 
 All arrays have the store's capacity as first dimension; entries ``[0:count]`` are the live droplets, kept
 contiguous (removal compacts, preserving order). Kernels receive the arrays and ``count``, never the store.
+
+Ownership. Only the store's methods add (:meth:`DropletStore.add`), remove (:meth:`~DropletStore.remove`), reorder
+(:meth:`~DropletStore.reorder`), grow (:meth:`~DropletStore.reserve`) or restore (:meth:`~DropletStore.restore`)
+droplets; each keeps coalescence partners pointing at the right droplets and increments :attr:`DropletStore.version`.
+Whoever holds per-droplet work arrays or a neighbour list (the DEM stepper, the coupling) compares the version it
+last saw with the store's instead of keeping a flag of its own. Checkpoints (:meth:`~DropletStore.state`,
+:meth:`~DropletStore.restore`) carry every field of :data:`FIELDS`: a field added there is stored, moved, permuted
+and checkpointed with no other edit.
 
 Arrays and units:
 
@@ -40,6 +48,7 @@ class DropletStore:
     def __init__(self, capacity: int = 1024):
         self.count = 0
         self.next_ident = 0
+        self.version = 0  # incremented by every change of the droplet set, order or capacity
         self.capacity = max(int(capacity), 1)
         for name, (width, dtype) in FIELDS.items():
             shape = (self.capacity,) if width is None else (self.capacity, width)
@@ -66,25 +75,30 @@ class DropletStore:
                 grown[self.count:] = -1
             setattr(self, name, grown)
         self.capacity = new
+        self.version += 1
 
-    def add(self, position, diameter, density, velocity=None, original_diameter=None, age=None) -> slice:
-        """Append droplets; returns the slice of their indices. Arrays broadcast to (n, 3) / (n,)."""
+    def add(self, position, diameter, density, velocity=None, original_diameter=None, age=None, **fields) -> slice:
+        """Append droplets; returns the slice of their indices. Arrays broadcast to (n, 3) / (n,).
+
+        Fields of :data:`FIELDS` not given (as arguments or keywords) start at 0, ``partner`` at -1 and ``ident``
+        numbers the droplets on from the last one; ``original_diameter`` defaults to ``diameter``."""
+        unknown = [name for name in fields if name not in FIELDS or name == "ident"]
+        if unknown:
+            raise KeyError(f"droplets: add() got unknown or reserved field(s) {unknown}")
         position = np.atleast_2d(np.asarray(position, dtype=float))
         n = position.shape[0]
         start = self.count
         self.reserve(start + n)
         sl = slice(start, start + n)
-        self.position[sl] = position
-        self.velocity[sl] = 0.0 if velocity is None else velocity
-        self.diameter[sl] = diameter
-        self.density[sl] = density
-        self.original_diameter[sl] = diameter if original_diameter is None else original_diameter
-        self.age[sl] = 0.0 if age is None else age
-        self.flags[sl] = 0
-        self.partner[sl] = -1
-        self.ident[sl] = np.arange(self.next_ident, self.next_ident + n)
+        values = {"position": position, "diameter": diameter, "density": density, "partner": -1,
+                  "original_diameter": diameter if original_diameter is None else original_diameter,
+                  **({} if velocity is None else {"velocity": velocity}), **({} if age is None else {"age": age}),
+                  **fields, "ident": np.arange(self.next_ident, self.next_ident + n)}
+        for name in FIELDS:
+            getattr(self, name)[sl] = values.get(name, 0)
         self.next_ident += n
         self.count += n
+        self.version += 1
         return sl
 
     def remove(self, mask: np.ndarray) -> None:
@@ -110,6 +124,28 @@ class DropletStore:
         self.flags[:n][lost_partner] &= ~np.int32(COALESCING)
         self.partner[n: self.count] = -1
         self.count = n
+        self.version += 1
+
+    def reorder(self, order) -> None:
+        """Permute the live droplets so that new p is old ``order[p]`` (a permutation of range(count)).
+
+        Every field moves with its droplet; coalescence partners are re-pointed to the new indices. Per-droplet arrays
+        held elsewhere must be permuted with the same ``order`` (``array[:n] = array[order]``).
+        """
+        from .neighbours import permute_rows
+
+        n = self.count
+        order = np.asarray(order, dtype=np.int64)
+        if order.shape != (n,):
+            raise ValueError(f"droplets: order has shape {order.shape}, expected ({n},)")
+        new_index = np.empty(n, dtype=np.int64)
+        new_index[order] = np.arange(n)
+        for name in FIELDS:
+            permute_rows(getattr(self, name), order)
+        partner = self.partner[:n]
+        has = partner >= 0
+        partner[has] = new_index[partner[has]]
+        self.version += 1
 
     def state(self) -> dict[str, np.ndarray | int]:
         """Plain data for checkpoints: the live arrays plus counters."""
@@ -117,15 +153,26 @@ class DropletStore:
         out["next_ident"] = self.next_ident
         return out
 
+    def restore(self, state: dict) -> None:
+        """Take the droplets of :meth:`state` in place of the current ones (every field of :data:`FIELDS`; a field
+        missing from ``state`` raises KeyError naming it)."""
+        missing = [name for name in FIELDS if name not in state]
+        if missing:
+            raise KeyError(f"droplet state has no field(s) {missing}")
+        n = len(state["diameter"])
+        self.reserve(max(2 * n, 1024))
+        for name in FIELDS:
+            getattr(self, name)[:n] = state[name]
+        self.partner[n:] = -1
+        self.count = n
+        self.next_ident = int(state["next_ident"])
+        self.version += 1
+
     @classmethod
     def from_state(cls, state: dict) -> "DropletStore":
-        """Rebuild a store from :meth:`state`."""
-        n = len(state["diameter"])
-        store = cls(max(2 * n, 1024))
-        for name in FIELDS:
-            getattr(store, name)[:n] = state[name]
-        store.count = n
-        store.next_ident = int(state["next_ident"])
+        """A new store holding the droplets of :meth:`state`."""
+        store = cls(max(2 * len(state["diameter"]), 1024))
+        store.restore(state)
         return store
 
     def volume(self) -> np.ndarray:

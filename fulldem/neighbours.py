@@ -613,21 +613,6 @@ def permute_rows(array, order) -> None:
 
 
 def reorder_store(store, order) -> None:
-    """Permute the live droplets of a :class:`fulldem.droplets.DropletStore` so that new p is old ``order[p]``.
-
-    Every field moves with its droplet; coalescence partners are re-pointed to the new indices. Per-droplet arrays
-    held elsewhere must be permuted with the same ``order`` (``array[:n] = array[order]``).
-    """
-    from .droplets import FIELDS
-
-    n = store.count
-    order = np.asarray(order, dtype=np.int64)
-    if order.shape != (n,):
-        raise ValueError(f"neighbours: order has shape {order.shape}, expected ({n},)")
-    new_index = np.empty(n, dtype=np.int64)
-    new_index[order] = np.arange(n)
-    for name in FIELDS:
-        permute_rows(getattr(store, name), order)
-    partner = store.partner[:n]
-    has = partner >= 0
-    partner[has] = new_index[partner[has]]
+    """Permute the live droplets of a store so that new p is old ``order[p]``: see
+    :meth:`fulldem.droplets.DropletStore.reorder`, the owner of the droplets."""
+    store.reorder(order)

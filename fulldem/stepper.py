@@ -14,6 +14,13 @@ One fluid step of length dt, from droplets at x^n and fluid (u^n, p^n):
 6. -J is deposited at x^n as the face force the fluid receives in the next step (so it is owed, not lost);
 7. droplets touching the bottom are removed as *settled*, those leaving by the outlet as *lost*.
 
+Event points. The droplet set (:class:`fulldem.droplets.DropletStore`, its only owner) changes only between fluid
+steps: at the step's end, after the owed force is deposited (step 7: exits; merges and re-created droplets belong
+here too), and at the next step's start, before anything is deposited (step 1: the feed). Between the first deposit
+(2) and the owed deposit (6) the droplets keep their order and number -- the deposits and interpolations of a step
+share per-droplet rows and stencils -- and a change there is refused (RuntimeError). The DEM stepper notices changes
+by the store's version and rebuilds its list once, at the next step.
+
 Momentum: droplets and fluid exchange drag and pressure forces through adjoint weights, so the total momentum
 (fluid + droplets + the impulse owed to the fluid) changes only by the imposed body forces, to round-off
 (tests/test_fulldem_stepper.py). Matte mass: fed = in slag + settled + lost, counted droplet by droplet.
@@ -37,7 +44,6 @@ from .droplets import DropletStore
 from .feeding import SIDES, classify_exits, draw_inlet_candidates, place_without_overlap
 from .forces import DRAG_LAWS, drag_coefficients
 from .grid import Grid
-from .neighbours import reorder_store
 
 #: Ratios sigma/h at which the grid's self-mobility factor is tabulated (see fulldem.coupling).
 MOBILITY_RATIOS = np.array([0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0])
@@ -237,7 +243,6 @@ class Simulation:
         self.eps_old = None
         self.owed_force = self.grid.zeros_faces()  # -J deposited, applied in the next fluid step [N/m^3]
         self.last = StepDiagnostics()
-        self._dem_stale = False  # droplets were added or removed since the DEM last saw them
         self._work = {}  # work arrays of the filtered kernel, by (purpose, index)
         self._alloc(self.store.capacity)
 
@@ -401,8 +406,7 @@ class Simulation:
         self.store.add(positions, d, rho, velocity=velocity)
         self.counters.mass_fed += float(np.sum(rho * math.pi / 6.0 * d**3))
         self.counters.fed += len(d)
-        self._ensure_capacity()
-        self._dem_stale = True  # the DEM's list and arrays are rebuilt once, at the start of the next DEM pass
+        self._ensure_capacity()  # the DEM sees the store's new version and rebuilds once, at the next step
         return len(d)
 
     def remove_exits(self):
@@ -423,7 +427,6 @@ class Simulation:
         self.counters.settled += int((code == 1).sum())
         self.counters.lost += int((code == 2).sum())
         s.remove(code > 0)
-        self._dem_stale = True
 
     # ------------------------------------------------------------------------------------------------ the step
     def step(self):
@@ -433,19 +436,17 @@ class Simulation:
             self.insert(self.schedule.advance(self.time + self.dt))
         s = self.store
         self._ensure_capacity()
-        if s.count and (self._dem_stale or self.steps % SORT_INTERVAL == 0):
+        if s.count and (not self.dem.ready or self.steps % SORT_INTERVAL == 0):
             # the skin first: the sort and the build then lay out the same cells, so a half list's rows hold
             # partners ahead in memory (see NeighbourList.spatial_order)
             self.dem.neighbours.skin = self.skin_for(max_speed(s.velocity, s.count))
             # droplets appended at the inlet (or moved into the holes of exits) would otherwise lie far in memory
             # from their neighbours, which cuts the parallel slabs of the DEM kernels to one (fulldem.dem.slab_count)
-            reorder_store(s, self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
-            self._dem_stale = True
+            s.reorder(self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
         # the DEM is set up at the first step even without droplets (a run may start empty and feed later)
-        rebuilt = self._dem_stale or not self.dem.ready
+        rebuilt = not self.dem.ready
         if rebuilt:  # one list build per step for this step's insertions, the last one's exits and a sort
             self.dem.droplets_changed()  # computes the contact forces at this state too
-            self._dem_stale = False
         n = s.count
         inv_cell_volume = 1.0 / self.grid.cell_volume
 
@@ -457,6 +458,7 @@ class Simulation:
         phi_cells = self.grid.zeros_cells()
         flux = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
         self.deposit_many(s.position, values, DEPOSIT_COMPONENTS, faces + [phi_cells] + flux, cp.STORE)
+        deposited_version = s.version  # the stencil table and start rows are per droplet: see the check below
         eps_faces = [np.subtract(1.0, f, out=f) for f in faces]
         if min(float(e.min()) for e in eps_faces) <= 0.0:
             raise FloatingPointError("void fraction reached zero on a face: droplets overfill a cell")
@@ -495,6 +497,9 @@ class Simulation:
         worst = max(at_start, self.dem.peak_overlap_ratio)
         # ... and the fluid is owed -J, deposited where the droplets felt the fluid
         owed_rows(self.impulse, self.external, self.substeps * self.h, n, -inv_cell_volume / self.dt, values)
+        if s.version != deposited_version:
+            raise RuntimeError("stepper: droplets were added, removed or reordered between the step's deposits; the "
+                               "droplet set may change only at the step's event points (see the module docstring)")
         self.owed_force = self.deposit_many(self.start_position, values[:3], INTERPOLATE_COMPONENTS[:3],
                                             [np.zeros(self.grid.face_shape(a)) for a in range(3)], cp.LOAD)
         self.time += self.dt

@@ -125,18 +125,18 @@ def _full_arguments(parser):
 
 
 def _full(args) -> int:
-    from fulldem.run import RunError, RunInterrupted, run_case
+    import fulldem
 
     case = load_case(args.case, args.overrides)
     _warn_implausible(case, "full")
     try:
-        run_case(case, args.out, end_time=args.end_time, resume=args.resume, droplets=args.droplets,
-                 feed=False if args.no_feed else None, progress=not args.quiet, overwrite=args.overwrite,
-                 command=args.command_line)
-    except RunInterrupted as exc:
+        fulldem.run(fulldem.setup(case, droplets=args.droplets, feed=False if args.no_feed else None), args.out,
+                    end_time=args.end_time, resume=args.resume, overwrite=args.overwrite, progress=not args.quiet,
+                    command=args.command_line)
+    except fulldem.RunInterrupted as exc:
         print(f"settler full: {exc}", file=sys.stderr)
         return 128 + exc.signal_number
-    except RunError as exc:
+    except fulldem.RunError as exc:
         print(f"settler full: error: {exc}", file=sys.stderr)
         return 3
     return 0

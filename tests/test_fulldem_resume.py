@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import fulldem.run as fr
-from fulldem.run import RunError, RunInterrupted, run_case
+import fulldem.driver as fr
+from fulldem.driver import RunError, RunInterrupted, run_case
 from settler.cases import CaseError, load_case
 from settler.output import read_time_series
 

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fulldem.run import RunError, run_case
+from fulldem.driver import RunError, run_case
 from settler.cases import load_case
 from settler.output import TIME_SERIES, read_time_series
 

@@ -43,7 +43,6 @@ from settler.output import (OutputError, atomic_write_text, mass_balance_error, 
 
 from . import fluid as fl
 from .droplet_list import DropletListError, read_droplet_list
-from .droplets import FIELDS, DropletStore
 from .io import CheckpointError, Progress, SnapshotWriter, load_checkpoint, save_checkpoint
 from .stepper import Counters, Simulation
 
@@ -209,7 +208,7 @@ def checkpoint_state(sim: Simulation):
     if sim.dem.ready:
         arrays.update({f"list_{k}": v for k, v in sim.dem.list_state().items()})
     meta = {"time": sim.time, "steps": sim.steps, "next_ident": sim.store.next_ident,
-            "counters": vars(sim.counters), "initial_mass": sim.initial_mass, "dem_stale": sim._dem_stale,
+            "counters": vars(sim.counters), "initial_mass": sim.initial_mass, "dem_stale": not sim.dem.ready,
             "schedule": {"fed_mass": sim.schedule.fed_mass, "time": sim.schedule.time,
                          "rng": sim.schedule._rng.bit_generator.state},
             "rng": sim.rng.bit_generator.state, "feed_on": bool(sim.feed_on),
@@ -220,16 +219,11 @@ def checkpoint_state(sim: Simulation):
 def restore_state(sim: Simulation, arrays, meta):
     """Put ``sim`` (built for the same case) into the state of :func:`checkpoint_state`."""
     state = {k[len("droplet_"):]: v for k, v in arrays.items() if k.startswith("droplet_")}
-    missing = [name for name in FIELDS if name not in state]
-    if missing:
-        raise CheckpointError(f"the checkpoint has no droplet field(s) {missing}")
     state["next_ident"] = meta["next_ident"]
-    restored = DropletStore.from_state(state)
-    store = sim.store
-    store.reserve(restored.capacity)
-    for name in FIELDS:
-        getattr(store, name)[: restored.count] = getattr(restored, name)[: restored.count]
-    store.count, store.next_ident = restored.count, restored.next_ident
+    try:
+        sim.store.restore(state)  # every field of fulldem.droplets.FIELDS
+    except KeyError as exc:
+        raise CheckpointError(f"the checkpoint lacks part of the droplet state: {exc.args[0]}") from None
     shapes = {"u": sim.fluid.u.shape, "v": sim.fluid.v.shape, "w": sim.fluid.w.shape, "p": sim.fluid.p.shape}
     wrong = {k: arrays[k].shape for k in shapes if arrays[k].shape != shapes[k]}
     if wrong:
@@ -251,7 +245,8 @@ def restore_state(sim: Simulation, arrays, meta):
     listed = {k[len("list_"):]: v for k, v in arrays.items() if k.startswith("list_")}
     if listed:  # the saved list: the next steps sum contact forces in the same order as the run that saved it
         sim.dem.restore_list(listed)
-        sim._dem_stale = bool(meta.get("dem_stale", False))
+        if meta.get("dem_stale", False):  # the saved run would have set the DEM up anew at its next step
+            sim.dem.invalidate()
     else:  # a checkpoint of an older version: rebuild (resumes agree to round-off)
         sim.dem.droplets_changed()
 
