@@ -126,6 +126,47 @@ class DropletStore:
         self.count = n
         self.version += 1
 
+    def merge(self, first, second) -> np.ndarray:
+        """Replace each pair (``first[k]``, ``second[k]``) of live droplets by one droplet; returns the merged
+        droplets' indices after the store is compacted.
+
+        The merged droplet conserves each pair's volume, mass (so its density is the mass over the volume), momentum
+        (it sits at the centre of mass, at the centre-of-mass velocity), Cu2S (its original volume is the sum of the
+        original volumes) and mass x age (its age is the mass-weighted age); it takes the lower index's slot and a
+        new ident, with no flags and no partner (droplets partnered with either one lose their partner). Pairs must
+        be disjoint. Other fields of :data:`FIELDS` take the lower index's value.
+        """
+        i = np.asarray(first, dtype=np.int64).ravel()
+        j = np.asarray(second, dtype=np.int64).ravel()
+        both = np.concatenate([i, j])
+        if i.shape != j.shape or (both.size and (both.min() < 0 or both.max() >= self.count)) \
+                or np.unique(both).size != both.size:
+            raise ValueError("droplets: merge() takes pairs of distinct live droplets, each in at most one pair")
+        if i.size == 0:
+            return i
+        keep, gone = np.minimum(i, j), np.maximum(i, j)
+        volume_k, volume_g = self.diameter[keep] ** 3, self.diameter[gone] ** 3  # x pi/6, which cancels
+        mass_k, mass_g = self.density[keep] * volume_k, self.density[gone] * volume_g
+        mass, volume = mass_k + mass_g, volume_k + volume_g
+        wk, wg = (mass_k / mass)[:, None], (mass_g / mass)[:, None]
+        self.position[keep] = wk * self.position[keep] + wg * self.position[gone]
+        self.velocity[keep] = wk * self.velocity[keep] + wg * self.velocity[gone]
+        self.age[keep] = wk[:, 0] * self.age[keep] + wg[:, 0] * self.age[gone]
+        self.original_diameter[keep] = np.cbrt(self.original_diameter[keep] ** 3 + self.original_diameter[gone] ** 3)
+        self.diameter[keep] = np.cbrt(volume)
+        self.density[keep] = mass / volume
+        n = self.count
+        partnered = np.isin(self.partner[:n], both)
+        self.partner[:n][partnered] = -1
+        self.flags[:n][partnered] &= ~np.int32(COALESCING)
+        self.partner[keep], self.flags[keep] = -1, 0
+        self.ident[keep] = np.arange(self.next_ident, self.next_ident + keep.size)
+        self.next_ident += keep.size
+        mask = np.zeros(n, dtype=bool)
+        mask[gone] = True
+        self.remove(mask)
+        return keep - np.searchsorted(np.sort(gone), keep)
+
     def reorder(self, order) -> None:
         """Permute the live droplets so that new p is old ``order[p]`` (a permutation of range(count)).
 

@@ -133,6 +133,7 @@ class Counters:
     fed: int = 0
     settled: int = 0
     lost: int = 0
+    merges: int = 0
 
 
 class StepDiagnostics(dict):
@@ -243,6 +244,7 @@ class Simulation:
         self.eps_old = None
         self.owed_force = self.grid.zeros_faces()  # -J deposited, applied in the next fluid step [N/m^3]
         self.last = StepDiagnostics()
+        self._merges = []  # (first, second) index arrays proposed during the step, applied by apply_events
         self._work = {}  # work arrays of the filtered kernel, by (purpose, index)
         self._alloc(self.store.capacity)
 
@@ -504,7 +506,7 @@ class Simulation:
                                             [np.zeros(self.grid.face_shape(a)) for a in range(3)], cp.LOAD)
         self.time += self.dt
         self.steps += 1
-        self.remove_exits()
+        self.apply_events()
         self.last = StepDiagnostics(max_cell_reynolds=fdiag.cell_reynolds, max_cfl=fdiag.courant,
                                     max_overlap_ratio=worst, pressure_iterations=fdiag.pressure_iterations,
                                     feed_backlog=len(self.backlog))
@@ -514,6 +516,24 @@ class Simulation:
             raise FloatingPointError(f"runaway overlap: {worst:.3f} of a diameter at t = {self.time:.6g} s "
                                      f"(fulldem.overlap_abort = {fd.overlap_abort})")
         return self.last
+
+    def propose_merges(self, first, second):
+        """Ask for pairs of droplets (indices at this step) to be merged at the step's end-of-step event point (see
+        :meth:`fulldem.droplets.DropletStore.merge`); the coalescence submodel's contact loop proposes them."""
+        self._merges.append((np.asarray(first, dtype=np.int64).ravel(), np.asarray(second, dtype=np.int64).ravel()))
+
+    def apply_events(self):
+        """The end-of-step event point, after the owed drag is deposited: merges proposed during the step, in a fixed
+        order (by the pair's lower ident, so a run does not depend on thread timing), then exits."""
+        if self._merges:
+            first = np.concatenate([m[0] for m in self._merges])
+            second = np.concatenate([m[1] for m in self._merges])
+            self._merges = []
+            ident = self.store.ident
+            order = np.argsort(np.minimum(ident[first], ident[second]), kind="stable")
+            self.store.merge(first[order], second[order])
+            self.counters.merges += len(order)
+        self.remove_exits()
 
     def skin_for(self, speed):
         """Neighbour-list skin [m] for droplets moving at most ``speed`` [m/s] (see :data:`SKIN_TRAVEL`)."""

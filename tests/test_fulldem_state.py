@@ -74,3 +74,61 @@ def test_the_droplet_set_cannot_change_between_a_steps_deposits(monkeypatch):
     monkeypatch.setattr(sim.dem, "advance", advance_then_reorder)
     with pytest.raises(RuntimeError, match="between the step's deposits"):
         sim.step()
+
+
+def _periodic_cloud(n=150, seed=4):
+    """The momentum test's set-up (tests/test_fulldem_stepper.py): droplets in a periodic box whose mean pressure
+    gradient carries their buoyant weight, so the total momentum stays constant while they settle."""
+    import math
+
+    from fulldem.droplets import DropletStore
+
+    case = load_case("simple", ["feed.mass_rate=0", "coalescence.enabled=false", "fulldem.cell_size=0.005",
+                                "fulldem.fluid_step=0.002"])
+    rng = np.random.default_rng(seed)
+    size, d = 0.05, 1.2e-3
+    store = DropletStore(256)
+    store.add(rng.uniform(0.1 * size, 0.9 * size, (n, 3)), rng.uniform(0.8, 1.2, n) * d, 5100.0,
+              age=rng.uniform(0.0, 5.0, n))
+    weight = np.sum((5100.0 - 3150.0) * math.pi / 6 * store.diameter[:n] ** 3) * 9.80665
+    sim = Simulation(case, droplets=store, feed=False, box=((size,) * 3, (0.0, 0.0, 0.0)),
+                     periodic=(True, True, True), body_force=(0.0, 0.0, weight / size**3))
+    return sim
+
+
+def test_merges_at_the_event_point_keep_momentum_and_matte():
+    """Pairs merged at the end-of-step event point: the total momentum (fluid + droplets + drag owed to the fluid)
+    stays constant to round-off as without merges, and the matte mass, Cu2S (original volume) and mass x age of the
+    droplets are those before the merge."""
+    sim = _periodic_cloud()
+    sim.step()
+    start = sim.momentum()
+    scale = np.sum(np.abs(sim.impulse[: sim.store.count]))
+    s = sim.store
+
+    def books():
+        n = s.count
+        mass = s.density[:n] * s.diameter[:n] ** 3
+        return n, mass.sum(), (s.original_diameter[:n] ** 3).sum(), (mass * s.age[:n]).sum()
+
+    n0, mass0, cu0, age0 = books()
+    # the five closest disjoint pairs (nearest neighbours in the box, as the contact loop would find them)
+    pos = s.position[:n0]
+    dist = np.linalg.norm(pos[:, None] - pos[None], axis=-1) + np.eye(n0)
+    used, first, second = set(), [], []
+    for flat in np.argsort(dist, axis=None):
+        i, j = divmod(int(flat), n0)
+        if i < j and i not in used and j not in used:
+            first.append(i), second.append(j), used.update((i, j))
+        if len(first) == 5:
+            break
+    sim.propose_merges(second[:2], first[:2])  # proposals may come in several calls and either order
+    sim.propose_merges(first[2:], second[2:])
+    sim.step()  # merged at this step's end
+    n1, mass1, cu1, age1 = books()
+    assert n1 == n0 - 5 and sim.counters.merges == 5
+    assert mass1 == pytest.approx(mass0, rel=1e-14) and cu1 == pytest.approx(cu0, rel=1e-14)
+    assert age1 == pytest.approx(age0, rel=1e-14)  # (ages do not advance without the reaction submodel)
+    for _ in range(5):
+        sim.step()
+    assert np.abs(sim.momentum() - start).max() < 1e-10 * scale
