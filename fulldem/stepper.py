@@ -558,8 +558,8 @@ class Simulation:
         return float(np.sum(s.density[:n] * math.pi / 6.0 * s.diameter[:n] ** 3))
 
     def terminal_velocity(self, diameter):
-        """Single-droplet terminal velocity in the case's slag and drag law [m/s] (positive down)."""
-        rho = self.case.matte.density
-        if self.case.drag.law == "stokes":
-            return stokes_velocity(diameter, rho, self.density, self.viscosity)
-        return schiller_naumann_velocity(diameter, rho, self.density, self.viscosity)
+        """Single-droplet terminal velocity in the case's slag, drag law and fluid-drop switch [m/s] (positive
+        down): the balance of the drag kernel's law against the buoyant weight, the same function popbal uses."""
+        from settler.derived import settling_velocity  # the one case-level dispatch (settler.physics law)
+
+        return settling_velocity(self.case, diameter)
