@@ -34,7 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from settler.physics import STANDARD_GRAVITY, FeedSchedule, schiller_naumann_velocity, stokes_velocity
+from settler.derived import settling_velocity
+from settler.physics import HINDRANCE, STANDARD_GRAVITY, FeedSchedule
 
 from . import coupling as cp
 from . import fluid as fl
@@ -402,9 +403,8 @@ class Simulation:
         positions = candidates[np.nonzero(ok)[0], chosen[ok]]
         d = diameters[ok]
         rho = self.case.matte.density
-        v_settle = np.array([schiller_naumann_velocity(x, rho, self.density, self.viscosity) for x in d])
         velocity = np.zeros((len(d), 3))
-        velocity[:, 2] = -v_settle
+        velocity[:, 2] = -self.terminal_velocity(d)  # fed at their own terminal velocity
         self.store.add(positions, d, rho, velocity=velocity)
         self.counters.mass_fed += float(np.sum(rho * math.pi / 6.0 * d**3))
         self.counters.fed += len(d)
@@ -482,7 +482,7 @@ class Simulation:
         forcing_rows(seen, self.own, volume, self.mass, self.density, self.gravity, inv_cell_volume, n,
                      self.fluid_velocity, self.external, eps_around)
         drag_coefficients(s.diameter, s.velocity, self.fluid_velocity, eps_around, n, self.density, self.viscosity,
-                          self.drag_law, fd.hindrance == "di_felice", self.viscosity_ratio, self.grid.spacing,
+                          self.drag_law, HINDRANCE[fd.hindrance], self.viscosity_ratio, self.grid.spacing,
                           fd.sigma_cells, fd.sigma_diameter, fd.self_correction, self.mobility_ratios, self.mobility,
                           self.oseen_logs, self.oseen_values, self.beta)
 
@@ -560,6 +560,4 @@ class Simulation:
     def terminal_velocity(self, diameter):
         """Single-droplet terminal velocity in the case's slag, drag law and fluid-drop switch [m/s] (positive
         down): the balance of the drag kernel's law against the buoyant weight, the same function popbal uses."""
-        from settler.derived import settling_velocity  # the one case-level dispatch (settler.physics law)
-
         return settling_velocity(self.case, diameter)
