@@ -23,6 +23,8 @@ def add_arguments(parser):
     parser.add_argument("--output-interval", type=seconds("--output-interval"), metavar="S",
                         help="simulated time between outputs [s], a finite number > 0; at most "
                              f"{MAX_OUTPUTS} outputs (default: popbal.output_interval)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the run files of another run in DIR (without it, such a folder is refused)")
     progress = parser.add_mutually_exclusive_group()
     progress.add_argument("--progress", action="store_true", default=None, help="print progress lines to stderr")
     progress.add_argument("--quiet", action="store_true",
@@ -32,10 +34,15 @@ def add_arguments(parser):
 def main(args) -> int:
     """Run ``settler reduced``; CaseError is reported by settler.cli (exit status 2), and so are the refusals of
     run() (options out of range, too many outputs, arrays over popbal.limits.memory_limit())."""
+    from settler.cli import warn_implausible
+    from settler.output import prepare_output_folder
+
     from . import run, setup
     from .driver import check_run
 
     model = setup(args.case, args.overrides)
+    warn_implausible(model.case, "reduced")
+    prepare_output_folder(args.out, overwrite=args.overwrite, create=False)  # refused before the run, created after
     progress = False if args.quiet else args.progress
     try:
         # the size checks first, so that their messages name the options rather than run()'s arguments
@@ -44,9 +51,7 @@ def main(args) -> int:
     except ValueError as exc:
         print(f"settler reduced: error: {exc}", file=sys.stderr)
         return 2
-    from settler.output import prepare_output_folder
-
-    out = result.save(prepare_output_folder(args.out, overwrite=getattr(args, "overwrite", False)))
+    out = result.save(prepare_output_folder(args.out, overwrite=args.overwrite))
     last = result.timeseries.iloc[-1]
     fed = last["mass_fed"]
     share = (lambda m: f"{100 * m / fed:.3g} %") if fed > 0 else (lambda m: "-")

@@ -1,19 +1,20 @@
 """The ``settler`` command line.
 
-Subcommands register themselves in :data:`COMMANDS` (name -> (add_arguments, run)); the engines add ``full`` and
-``reduced`` the same way.
+Subcommands are listed in :data:`COMMANDS` (name -> (add_arguments, run, help)). The engines' commands live in the
+engines (``popbal/cli.py``, ``fulldem/cli.py``) and are named in :data:`ENGINES`; this shared layer imports an engine
+only when its command runs, so ``settler --version``, ``info`` and ``cases`` load neither.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import shlex
 import sys
 
 from . import __version__
-from .arguments import seconds
 from .cases import SCHEMA, CaseError, list_presets, load_case
-from .output import OutputError, prepare_output_folder, to_json
+from .output import OutputError, to_json
 
 def _case_help() -> str:
     try:
@@ -46,7 +47,7 @@ def _info(args) -> int:
     from .derived import as_records, derived_numbers, format_numbers
 
     case = load_case(args.case, args.overrides)
-    _warn_implausible(case, "info")
+    warn_implausible(case, "info")
     numbers = derived_numbers(case)
     if args.json:
         print(to_json({"case": case.to_dict(), "derived": as_records(numbers)}))
@@ -85,64 +86,7 @@ def _cases(args) -> int:
     return 0
 
 
-# ------------------------------------------------------------------------------------------------------- reduced
-def _reduced_arguments(parser):
-    from popbal.cli import add_arguments
-
-    _add_case_arguments(parser)
-    add_arguments(parser)
-    parser.add_argument("--overwrite", action="store_true",
-                        help="replace the run files of another run in DIR (without it, such a folder is refused)")
-
-
-def _reduced(args) -> int:
-    from popbal.cli import main as reduced_main
-
-    _warn_implausible(load_case(args.case, args.overrides), "reduced")
-    prepare_output_folder(args.out, overwrite=args.overwrite, create=False)  # refused before the run, created after
-    return reduced_main(args)
-
-
-# ---------------------------------------------------------------------------------------------------------- full
-def _full_arguments(parser):
-    _add_case_arguments(parser)
-    parser.add_argument("--out", required=True, metavar="DIR",
-                        help="output folder (created if missing; a folder holding another run is refused unless "
-                             "--overwrite or --resume is given)")
-    parser.add_argument("--end-time", type=seconds("--end-time"), metavar="SECONDS",
-                        help="simulated time to stop at [s] (default: the case's fulldem.end_time)")
-    parser.add_argument("--resume", action="store_true",
-                        help="continue the run in DIR from its checkpoint.npz (written every "
-                             "fulldem.checkpoint_interval of wall time, at the end, and on Ctrl-C or SIGTERM); "
-                             "only with the same case")
-    parser.add_argument("--overwrite", action="store_true",
-                        help="replace the run files of another run in DIR (without it, such a folder is refused)")
-    parser.add_argument("--droplets", metavar="CSV",
-                        help="initial droplets: CSV with a header line and columns x, y, z, diameter [, density] "
-                             "in SI units")
-    parser.add_argument("--no-feed", action="store_true", help="switch the droplet feed off")
-    parser.add_argument("--quiet", action="store_true", help="no progress line")
-
-
-def _full(args) -> int:
-    import fulldem
-
-    case = load_case(args.case, args.overrides)
-    _warn_implausible(case, "full")
-    try:
-        fulldem.run(fulldem.setup(case, droplets=args.droplets, feed=False if args.no_feed else None), args.out,
-                    end_time=args.end_time, resume=args.resume, overwrite=args.overwrite, progress=not args.quiet,
-                    command=args.command_line)
-    except fulldem.RunInterrupted as exc:
-        print(f"settler full: {exc}", file=sys.stderr)
-        return 128 + exc.signal_number
-    except fulldem.RunError as exc:
-        print(f"settler full: error: {exc}", file=sys.stderr)
-        return 3
-    return 0
-
-
-def _warn_implausible(case, command):
+def warn_implausible(case, command):
     """Print the case's plausibility warnings (values far outside what the laws were made for) to stderr."""
     from .derived import plausibility_warnings
 
@@ -150,18 +94,35 @@ def _warn_implausible(case, command):
         print(f"settler {command}: warning: {text}", file=sys.stderr)
 
 
+def _engine(module_name):
+    """(add_arguments, run) of an engine's command module, imported only when its command is used: the module has
+    ``add_arguments(parser)`` (its options beyond CASE and the overrides) and ``main(args)`` (the exit status)."""
+    def add_arguments(parser):
+        _add_case_arguments(parser)
+        importlib.import_module(module_name).add_arguments(parser)
+
+    def run(args):
+        return importlib.import_module(module_name).main(args)
+
+    return add_arguments, run
+
+
+#: The subcommands: name -> (add_arguments, run, help). The engines register their command modules here by name;
+#: the shared layer imports none of them until its command is chosen.
+ENGINES = {"reduced": ("popbal.cli", "run the reduced population-balance model (popbal) of a case"),
+           "full": ("fulldem.cli", "run the coupled CFD-DEM engine (fulldem) on a case")}
 COMMANDS = {
     "info": (_info_arguments, _info, "print a resolved case and its derived numbers"),
     "cases": (_cases_arguments, _cases, "list the case presets, or print the case-file reference"),
-    "reduced": (_reduced_arguments, _reduced, "run the reduced population-balance model (popbal) of a case"),
-    "full": (_full_arguments, _full, "run the coupled CFD-DEM engine (fulldem) on a case"),
+    **{name: (*_engine(module), text) for name, (module, text) in ENGINES.items()},
 }
 
 
 DEBUG_HELP = "show the Python traceback of an error instead of the one-line message"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser; with ``only``, the other subcommands are listed but their arguments (and engines) not loaded."""
     parser = argparse.ArgumentParser(
         prog="settler", description="Matte-droplet settling in copper flash-smelting settlers: CFD-DEM (full) and "
                                     "population-balance (reduced) models sharing one set of droplet physics.")
@@ -170,14 +131,15 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (add_arguments, _, help_text) in COMMANDS.items():
         command = sub.add_parser(name, help=help_text, description=help_text)
-        add_arguments(command)
+        if only is None or name == only:
+            add_arguments(command)
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
     return parser
 
 
 def parse(argv):
     """Parse ``argv``; overrides (``section.key=value``) may come before or after the options."""
-    parser = build_parser()
+    parser = build_parser(only=next((a for a in argv if a in COMMANDS), ""))
     args, extra = parser.parse_known_args(argv)
     stray = [token for token in extra if not is_override(token) or not hasattr(args, "overrides")]
     if stray:

@@ -94,3 +94,13 @@ def test_unexpected_errors_are_one_line_and_debug_shows_the_traceback(monkeypatc
 def test_python_dash_m_settler():
     out = subprocess.run([sys.executable, "-m", "settler", "cases"], capture_output=True, text=True)
     assert out.returncode == 0 and "simple" in out.stdout
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["info", "demo"], ["cases"], ["info", "--help"]])
+def test_shared_commands_load_no_engine(argv):
+    """The shared layer dispatches to the engines by name (settler.cli.ENGINES) and imports one only when its
+    command runs."""
+    code = ("import sys\nfrom settler.cli import main\ntry:\n    main(%r)\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('popbal', 'fulldem')))" % (argv,))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]"
