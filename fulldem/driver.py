@@ -276,7 +276,9 @@ def _read_checkpoint_for(case, checkpoint: Path, out: Path, log):
 
 class _SignalCatcher:
     """Within ``with``: SIGINT and SIGTERM only set ``caught`` (the run saves and stops after the step under way);
-    a second SIGINT raises KeyboardInterrupt at once. Outside the main thread it does nothing."""
+    a second SIGINT raises KeyboardInterrupt at once. Outside the main thread it does nothing, and a signal the
+    process ignores stays ignored (a shell starts background jobs with SIGINT ignored, so that Ctrl-C on a script
+    does not stop them)."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -292,7 +294,8 @@ class _SignalCatcher:
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
             for sig in self.SIGNALS:
-                self._previous[sig] = signal.signal(sig, self._handle)
+                if signal.getsignal(sig) is not signal.SIG_IGN:
+                    self._previous[sig] = signal.signal(sig, self._handle)
         return self
 
     def __exit__(self, *exc):

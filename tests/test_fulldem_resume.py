@@ -40,6 +40,18 @@ def _assert_same_state(a, b):
         assert np.array_equal(a[name], b[name]), f"{name} differs by {np.abs(a[name] - b[name]).max()}"
 
 
+@pytest.fixture(autouse=True)
+def default_signal_handlers():
+    """The tests send real signals: start from Python's default handlers even where the test process was started
+    with SIGINT ignored (a background job), and put back what was there."""
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    yield
+    for sig, handler in before.items():
+        signal.signal(sig, handler)
+
+
 def _interrupt_at(monkeypatch, step, signum):
     """Make the run receive ``signum`` right after its fluid step number ``step`` (a real signal, delivered to this
     process's handler)."""
@@ -69,13 +81,14 @@ def straight(tmp_path_factory):
 @pytest.mark.parametrize("stop_step, signum", [(15, signal.SIGINT), (37, signal.SIGTERM)])
 def test_signal_saves_and_resume_is_bitwise(straight, tmp_path, monkeypatch, stop_step, signum):
     case = load_case("demo", SMALL)
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     _interrupt_at(monkeypatch, stop_step, signum)
     with pytest.raises(RunInterrupted, match="--resume") as info:
         run_case(case, tmp_path, end_time=0.3, progress=False, log=quiet)
     assert info.value.signal_number == signum
     assert json.loads(bytes(np.load(tmp_path / "checkpoint.npz")["__meta__"]))["steps"] == stop_step
     monkeypatch.undo()
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the run put the handlers back
+    assert {sig: signal.getsignal(sig) for sig in handlers} == handlers  # the run put the handlers back
     run_case(case, tmp_path, end_time=0.3, resume=True, progress=False, log=quiet)
     _assert_same_state(straight, tmp_path)
     a, b = read_time_series(straight / "timeseries.csv"), read_time_series(tmp_path / "timeseries.csv")
@@ -268,3 +281,12 @@ def test_grid_refusals_name_the_key(override, expected, capsys, tmp_path):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and expected in err and override.split("=")[0] in err, err
     assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+def test_an_ignored_sigint_stays_ignored(tmp_path, monkeypatch):
+    """A background job started by a shell ignores SIGINT; the run leaves it so (and finishes)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _interrupt_at(monkeypatch, 2, signal.SIGINT)
+    frame = run_case(load_case("demo", SMALL), tmp_path, end_time=0.01, progress=False, log=quiet)
+    assert frame["time"].iloc[-1] == pytest.approx(0.01)
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
