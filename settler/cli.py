@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import shlex
 import sys
 
@@ -175,6 +176,9 @@ def main(argv=None) -> int:
             raise
         print(f"{where}: error: out of memory; use a coarser grid or fewer outputs", file=sys.stderr)
         return 3
+    except BrokenPipeError:  # the reader of our output went away (`settler info simple | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except OSError as exc:
         if args.debug:
             raise

@@ -104,3 +104,13 @@ def test_shared_commands_load_no_engine(argv):
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('popbal', 'fulldem')))" % (argv,))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_a_closed_pipe_stops_quietly():
+    """`settler info simple | head -1`: the reader goes away; no error line, no traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "settler", "info", "simple"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.readline()
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait() in (0, 141) and err == ""
