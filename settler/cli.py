@@ -177,7 +177,10 @@ def main(argv=None) -> int:
         print(f"{where}: error: out of memory; use a coarser grid or fewer outputs", file=sys.stderr)
         return 3
     except BrokenPipeError:  # the reader of our output went away (`settler info simple | head`): stop quietly
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        try:  # and let nothing more be written to the closed pipe at exit
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (AttributeError, ValueError, OSError):
+            pass
         return 141
     except OSError as exc:
         if args.debug:
