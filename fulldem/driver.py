@@ -141,10 +141,8 @@ def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
     s, n, c = sim.store, sim.store.count, sim.counters
     d = s.diameter[:n]
     down = -s.velocity[:n, 2]
-    g = sim.case.geometry
-    cx, cy = sim.case.inlet_center
     mid = sim.lower[2] + 0.5 * sim.grid.size[2]
-    near_axis = ((s.position[:n, 0] - cx) ** 2 + (s.position[:n, 1] - cy) ** 2 <= (0.5 * g.inlet_diameter) ** 2) \
+    near_axis = sim.bounds.inlet.contains(s.position[:n, 0], s.position[:n, 1]) \
         & (np.abs(s.position[:n, 2] - mid) <= 0.1 * sim.grid.size[2])
     in_slag = sim.mass_in_slag()
     fed = c.mass_fed + sim.initial_mass

@@ -9,9 +9,6 @@ import math
 import numpy as np
 from numba import njit
 
-#: Side codes of the outlet wall, as in the case file (geometry.outlet_side).
-SIDES = {"x-": 0, "x+": 1, "y-": 2, "y+": 3}
-
 
 @njit(cache=True)
 def _cell_of(x, y, z, lower, cell, dims):

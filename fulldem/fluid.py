@@ -67,6 +67,7 @@ import numpy as np
 from numba import njit
 
 from . import pressure as _pressure
+from .boundaries import SIDES, side_axis, side_is_upper
 
 #: Ghost layers on each side of the padded work arrays (the reconstructions reach two faces upwind).
 PAD = 2
@@ -210,7 +211,8 @@ def disk_coverage(face_lower, spacing, counts, centre, radius) -> np.ndarray:
     return np.clip(area / spacing**2, 0.0, 1.0)
 
 
-_SIDES = {"x-": (0, False), "x+": (0, True), "y-": (1, False), "y+": (1, True)}
+#: (axis, upper wall) of each side name, from the one encoding in fulldem.boundaries.
+_SIDES = {name: (side_axis(code), side_is_upper(code)) for name, code in SIDES.items()}
 
 
 def _check_disk_inside(name, centre, radius, lower, upper):

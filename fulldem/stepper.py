@@ -42,7 +42,8 @@ from . import fluid as fl
 from .contacts import effective_mass, stable_step, stiffness_for_overlap
 from .dem import DemStepper, droplet_masses, max_speed
 from .droplets import DropletStore
-from .feeding import SIDES, classify_exits, draw_inlet_candidates, place_without_overlap
+from .boundaries import boundaries_for
+from .feeding import classify_exits, draw_inlet_candidates, place_without_overlap
 from .forces import DRAG_LAWS, drag_coefficients
 from .grid import Grid
 
@@ -175,23 +176,16 @@ class Simulation:
         self.initial_mass = 0.0  # matte present at the start (droplet lists), counted as fed [kg]
         self.store = droplets if droplets is not None else DropletStore(4096)
 
-        # boundaries
+        # boundaries: one description (fulldem.boundaries) for the fluid, the feed, the exits and the contacts
         use_inlet = (self.own_box and case.slag.feed_rate > 0.0) if inlet is None else inlet
         use_outlet = (self.own_box and case.has_outlet) if outlet is None else outlet
-        inlet_disk = fl.InletDisk(case.inlet_center, 0.5 * g.inlet_diameter) if use_inlet else None
-        outlet_disk = None
-        self.outlet_code = (-1, 0.0, 0.0, 0.0, 0.0)
-        if use_outlet:
-            side = SIDES[g.outlet_side]
-            transverse = 0.5 * (g.depth if side < 2 else g.width)
-            outlet_disk = fl.OutletDisk(g.outlet_side, (transverse, g.outlet_height), 0.5 * g.outlet_diameter)
-            axis = 0 if side < 2 else 1
-            plane = self.lower[axis] if side % 2 == 0 else self.upper[axis]
-            self.outlet_code = (side, plane, transverse, g.outlet_height, 0.5 * g.outlet_diameter)
-        self.boundary = fl.make_boundary(self.grid, inlet=inlet_disk, outlet=outlet_disk,
-                                         inflow_flux=case.slag.feed_rate / case.slag.density if use_inlet else 0.0)
+        self.bounds = boundaries_for(case, self.lower, self.upper, periodic, slag_inlet=use_inlet,
+                                     outlet=use_outlet,
+                                     absorbing_bottom=(not periodic[2]) if absorbing_bottom is None else absorbing_bottom)
+        self.boundary = fl.make_boundary(self.grid, inlet=self.bounds.fluid_inlet(),
+                                         outlet=self.bounds.fluid_outlet(), inflow_flux=self.bounds.inflow_flux)
         self.fluid = fl.rest_state(self.grid)
-        self.absorbing_bottom = (not periodic[2]) if absorbing_bottom is None else absorbing_bottom
+        self.absorbing_bottom = self.bounds.absorbing_bottom
 
         # feed
         f = case.feed
@@ -214,12 +208,10 @@ class Simulation:
         self.substeps = max(1, math.ceil(fd.fluid_step / dem_step - 1e-9))
         self.dt = fd.fluid_step
         self.h = self.dt / self.substeps
-        side = self.outlet_code[0]
-        outlet_for_dem = (side, self.outlet_code[3], self.outlet_code[2], self.outlet_code[4]) if side >= 0 else None
         self.d_ref = d_ref
         self.dem = DemStepper(self.store, self.lower, self.grid.size, self.periodic, self.h, self.stiffness_ref,
                               d_ref, fd.restitution, SKIN_MIN * d_ref, np.zeros(3),
-                              absorbing_bottom=self.absorbing_bottom, outlet=outlet_for_dem,
+                              absorbing_bottom=self.absorbing_bottom, outlet=self.bounds.contact_outlet(),
                               sort_on_rebuild=False)
 
         # coupling tables and work arrays
@@ -383,16 +375,15 @@ class Simulation:
         diameters = np.concatenate([self.backlog, diameters])
         if diameters.size == 0:
             return 0
-        fd, g = self.case.fulldem, self.case.geometry
-        top = self.upper[2]
-        cx, cy = self.case.inlet_center
-        candidates = draw_inlet_candidates(self.rng, diameters, (cx, cy), 0.5 * g.inlet_diameter, top,
-                                           fd.insertion_layer, fd.insertion_tries)
+        fd, inlet = self.case.fulldem, self.bounds.inlet
+        top, radius = inlet.top, inlet.radius
+        cx, cy = inlet.centre
+        candidates = draw_inlet_candidates(self.rng, diameters, (cx, cy), radius, top, fd.insertion_layer,
+                                           fd.insertion_tries)
         reach = max(float(diameters.max()), float(self.store.diameter[: self.store.count].max())
                     if self.store.count else 0.0)
-        lower = np.array([cx - 0.5 * g.inlet_diameter, cy - 0.5 * g.inlet_diameter,
-                          top - fd.insertion_layer - diameters.max()])
-        upper = np.array([cx + 0.5 * g.inlet_diameter, cy + 0.5 * g.inlet_diameter, top])
+        lower = np.array([cx - radius, cy - radius, top - fd.insertion_layer - diameters.max()])
+        upper = np.array([cx + radius, cy + radius, top])
         chosen = np.empty(len(diameters), dtype=np.int64)
         place_without_overlap(candidates, diameters, self.store.position, self.store.diameter, self.store.count,
                               lower, upper, reach, chosen)
@@ -416,10 +407,7 @@ class Simulation:
         n = s.count
         if n == 0:
             return
-        side, plane, transverse, height, radius = self.outlet_code
-        bottom = self.lower[2] if self.absorbing_bottom else -math.inf
-        leaving = classify_exits(s.position, s.diameter, n, bottom, side, plane, transverse, height, radius,
-                                 self.exit_code)
+        leaving = classify_exits(s.position, s.diameter, n, *self.bounds.exit_args(), self.exit_code)
         if leaving == 0:
             return
         code = self.exit_code[:n]
