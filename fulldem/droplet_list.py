@@ -160,13 +160,13 @@ def read_droplet_list(path, *, lower, upper, slag_density, default_density, over
     text = _read_text(path)
 
     # header: the first line that is neither blank nor a comment; then the data lines, with their line numbers
-    header, names, data, data_lines = None, None, [], []
+    names, data, data_lines = None, [], []
     for number, raw in enumerate(text.splitlines(), start=1):
         body = raw.split("#", 1)[0]
         if not body.strip():
             continue
         if names is None:
-            header, names = number, _parse_header(path, body, number)
+            names = _parse_header(path, body, number)
         else:
             data.append(body)
             data_lines.append(number)

@@ -110,7 +110,6 @@ def _derived_numbers(case: Case) -> dict[str, list[Quantity]]:
     f, s, m, g = _ieee(case.feed), _ieee(case.slag), _ieee(case.matte), _ieee(case.geometry)
     mu = np.float64(case.slag_viscosity)
     rho_p = m.density
-    dist = (f.scale_std, f.scale_min, f.scale_max)
     groups: dict[str, list[Quantity]] = {}
 
     groups["slag"] = [
