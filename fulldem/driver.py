@@ -45,6 +45,7 @@ from . import fluid as fl
 from .droplet_list import DropletListError, read_droplet_list
 from .io import CheckpointError, Progress, SnapshotWriter, load_checkpoint, save_checkpoint
 from .stepper import Counters, Simulation
+from .submodels import missing_submodels
 
 #: Case keys that control how a run is carried out, not what it computes: they may differ between a checkpoint and
 #: the case that resumes it (section, key).
@@ -363,12 +364,14 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
         snaps.entries = [tuple(e) for e in meta.get("snapshots", [])]
         wall_before = float(meta.get("wall_time", 0.0))
         log(f"resumed from {checkpoint} at t = {sim.time:.6g} s, {sim.store.count} droplets")
-    if case.coalescence.enabled or case.reaction.enabled:
-        log("settler full: note: the coalescence and reaction submodels are not in the engine yet; this run has "
-            "neither (coalescence.enabled / reaction.enabled are ignored)")
+    missing = missing_submodels(case)
+    if missing:
+        log(f"settler full: note: the {' and '.join(missing)} submodel(s) are not in the engine yet; this run has "
+            f"none ({', '.join(m + '.enabled' for m in missing)} ignored)")
     startup = {"grid_shape": list(sim.grid.shape), "cell_size": sim.grid.spacing, "fluid_step": sim.dt,
                "dem_step": sim.h, "dem_substeps": sim.substeps, "contact_stiffness_ref": sim.stiffness_ref,
-               "slag_viscosity": sim.viscosity, "submodels_missing": ["coalescence", "reaction"],
+               "slag_viscosity": sim.viscosity, "submodels": [m.name for m in sim.submodels],
+               "submodels_missing": missing,
                "numba_threads": numba.get_num_threads(), "numba_threading_layer": _threading_layer(),
                "coupling_kernel": case.fulldem.kernel, "case_fingerprint": case_fingerprint(case),
                "feed_on": bool(sim.feed_on), "command": command}

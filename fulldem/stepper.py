@@ -15,8 +15,9 @@ One fluid step of length dt, from droplets at x^n and fluid (u^n, p^n):
 7. droplets touching the bottom are removed as *settled*, those leaving by the outlet as *lost*.
 
 Event points. The droplet set (:class:`fulldem.droplets.DropletStore`, its only owner) changes only between fluid
-steps: at the step's end, after the owed force is deposited (step 7: exits; merges and re-created droplets belong
-here too), and at the next step's start, before anything is deposited (step 1: the feed). Between the first deposit
+steps: at the step's end, after the owed force is deposited (step 7: merges, exits; re-created droplets belong here
+too), and at the next step's start, before anything is deposited (step 1: the feed). The processes acting there are
+the run's submodels (:mod:`fulldem.submodels`). Between the first deposit
 (2) and the owed deposit (6) the droplets keep their order and number -- the deposits and interpolations of a step
 share per-droplet rows and stencils -- and a change there is refused (RuntimeError). The DEM stepper notices changes
 by the store's version and rebuilds its list once, at the next step.
@@ -46,6 +47,7 @@ from .boundaries import boundaries_for
 from .feeding import classify_exits, draw_inlet_candidates, place_without_overlap
 from .forces import DRAG_LAWS, drag_coefficients
 from .grid import Grid
+from .submodels import submodels_for
 
 #: Ratios sigma/h at which the grid's self-mobility factor is tabulated (see fulldem.coupling).
 MOBILITY_RATIOS = np.array([0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0])
@@ -190,6 +192,7 @@ class Simulation:
         # feed
         f = case.feed
         self.feed_on = (f.mass_rate > 0.0) if feed is None else feed
+        self.submodels = submodels_for(case)  # what acts at the step's event points (fulldem.submodels)
         self.schedule = FeedSchedule(f.mass_rate, f.mean_diameter, case.matte.density, f.scale_std, f.scale_min,
                                      f.scale_max, seed=f.seed)
         self.backlog = np.empty(0)
@@ -422,8 +425,8 @@ class Simulation:
     def step(self):
         """Advance the coupled system by one fluid step dt (see the module docstring)."""
         fd = self.case.fulldem
-        if self.feed_on:
-            self.insert(self.schedule.advance(self.time + self.dt))
+        for submodel in self.submodels:  # the start-of-step event point: the feed
+            submodel.at_start(self)
         s = self.store
         self._ensure_capacity()
         if s.count and (not self.dem.ready or self.steps % SORT_INTERVAL == 0):
@@ -511,8 +514,14 @@ class Simulation:
         self._merges.append((np.asarray(first, dtype=np.int64).ravel(), np.asarray(second, dtype=np.int64).ravel()))
 
     def apply_events(self):
-        """The end-of-step event point, after the owed drag is deposited: merges proposed during the step, in a fixed
-        order (by the pair's lower ident, so a run does not depend on thread timing), then exits."""
+        """The end-of-step event point, after the owed drag is deposited: each submodel's ``at_end`` in order
+        (:func:`fulldem.submodels.submodels_for`: merges, the case's submodels, exits)."""
+        for submodel in self.submodels:
+            submodel.at_end(self)
+
+    def apply_merges(self):
+        """Merge the pairs proposed during the step, in a fixed order (by the pair's lower ident, so a run does not
+        depend on thread timing)."""
         if self._merges:
             first = np.concatenate([m[0] for m in self._merges])
             second = np.concatenate([m[1] for m in self._merges])
@@ -521,7 +530,6 @@ class Simulation:
             order = np.argsort(np.minimum(ident[first], ident[second]), kind="stable")
             self.store.merge(first[order], second[order])
             self.counters.merges += len(order)
-        self.remove_exits()
 
     def skin_for(self, speed):
         """Neighbour-list skin [m] for droplets moving at most ``speed`` [m/s] (see :data:`SKIN_TRAVEL`)."""

@@ -132,3 +132,31 @@ def test_merges_at_the_event_point_keep_momentum_and_matte():
     for _ in range(5):
         sim.step()
     assert np.abs(sim.momentum() - start).max() < 1e-10 * scale
+
+
+def test_submodels_act_at_the_step_event_points():
+    """A submodel's at_start runs before the step's deposits (a droplet it adds takes part in that step) and its
+    at_end after the step (at the new time); the built-in ones are the feed, merges and exits, in that order."""
+    from fulldem.submodels import Exits, Feed, Merges, Submodel
+
+    class Recorder(Submodel):
+        name = "recorder"
+
+        def __init__(self):
+            self.seen = []
+
+        def at_start(self, sim):
+            self.seen.append(("start", sim.time))
+            sim.store.add([[0.05, 0.05, 0.05]], 1e-3, 5200.0)
+
+        def at_end(self, sim):
+            self.seen.append(("end", sim.time))
+
+    sim = Simulation(load_case("demo", SMALL), feed=False)
+    assert [type(m) for m in sim.submodels] == [Feed, Merges, Exits]
+    recorder = Recorder()
+    sim.submodels.insert(1, recorder)
+    sim.step()
+    assert recorder.seen == [("start", 0.0), ("end", pytest.approx(sim.dt))]
+    assert sim.store.count == 1 and sim.store.velocity[0, 2] < 0.0  # it settled during the step it was added in
+
