@@ -59,6 +59,39 @@ SKIN = 0.25 * DIAMETER
 STEPS = 2000
 
 
+def run_dem(store, steps, h, box_size, stiffness_ref, diameter_ref, restitution, wall_restitution, skin,
+            body_acceleration, viscosity, report_steps=(), half_list=True, track_impulse=True):
+    """DEM-only run in a closed box with all six walls and linear Stokes drag beta = 3 pi mu d in still fluid.
+
+    Returns a dict: ``loop_seconds`` (the stepping loop only, set-up and first build excluded), ``rebuilds``
+    (list builds during the loop), ``kinetic_energy`` {step: J} at ``report_steps``, ``max_overlap_ratio``,
+    ``impulse`` (the drag impulses, (n, 3) [N s], if tracked) and the ``stepper``.
+    """
+    stepper = dem.DemStepper(store, (0.0, 0.0, 0.0), box_size, (False, False, False), h, stiffness_ref,
+                             diameter_ref, restitution, skin, body_acceleration, wall_restitution=wall_restitution,
+                             half_list=half_list)
+    stepper.droplets_changed()
+    n = store.count
+    stepper.set_drag(3.0 * math.pi * viscosity * store.diameter)
+    still = np.zeros((1, 3))
+    impulse = np.zeros((store.capacity, 3)) if track_impulse else dem.NO_IMPULSE
+    builds_before = stepper.neighbours.builds
+    energies = {}
+    loop = 0.0
+    report = sorted({int(s) for s in report_steps if 0 < int(s) <= steps})
+    done = 0
+    for target in report + [steps]:
+        t0 = time.perf_counter()
+        stepper.advance(target - done, still, impulse)
+        loop += time.perf_counter() - t0
+        done = max(done, target)
+        if target in report:
+            energies[target] = dem.kinetic_energy(store.velocity, stepper.mass, n)
+    return {"loop_seconds": loop, "rebuilds": stepper.neighbours.builds - builds_before,
+            "kinetic_energy": energies, "max_overlap_ratio": stepper.max_overlap_ratio,
+            "impulse": impulse[:n] if track_impulse else None, "stepper": stepper}
+
+
 def damping_ratio_for_rate(rate, mass_effective, stiffness=STIFFNESS):
     """zeta of a contact whose dashpot is m_eff * rate: gamma = 2 zeta sqrt(k m_eff) -> zeta = rate/2 sqrt(m_eff/k)."""
     return 0.5 * rate * math.sqrt(mass_effective / stiffness)
@@ -148,7 +181,7 @@ def _explicit_drag(velocity, drag, count, force):
 
 
 def run_ours(pos, steps, drag="exact", half_list=True, track_impulse=False):
-    """Our engine on the case; returns :func:`fulldem.dem.run_dem`'s dict."""
+    """Our engine on the case; returns :func:`run_dem`'s dict."""
     n = len(pos)
     store = DropletStore(n)
     store.add(pos, DIAMETER, DENSITY)
@@ -160,7 +193,7 @@ def run_ours(pos, steps, drag="exact", half_list=True, track_impulse=False):
     body = np.array([0.0, 0.0, -GRAVITY])
     report = [s for s in (200, 2000) if s <= steps]
     if drag == "exact":
-        out = dem.run_dem(store, steps, STEP, (BOX, BOX, BOX), STIFFNESS, DIAMETER, e_pair, e_wall, SKIN, body,
+        out = run_dem(store, steps, STEP, (BOX, BOX, BOX), STIFFNESS, DIAMETER, e_pair, e_wall, SKIN, body,
                           VISCOSITY, report_steps=report, half_list=half_list, track_impulse=track_impulse)
         return out
     # explicit drag, as in LIGGGHTS: beta = 0 in our integrator, -gamma v added to the force after the contacts

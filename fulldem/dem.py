@@ -1,8 +1,8 @@
 """DEM kernels for matte droplets: contact and wall forces, and an exponential velocity-Verlet integrator.
 
-Kernels are ``@njit(cache=True)`` functions of arrays and scalars (SI units); :class:`DemStepper` orchestrates them
-and :func:`run_dem` runs the DEM-only benchmark case (``benchmarks/bench_dem.py``). Each kernel has a plain NumPy
-twin (suffix ``_reference``) that the tests compare it with.
+Kernels are ``@njit(cache=True)`` functions of arrays and scalars (SI units); :class:`DemStepper` orchestrates them.
+The contact, wall and integrator kernels have plain NumPy twins in :mod:`fulldem.reference` that the tests compare
+them with; the DEM-only benchmark's driver is ``benchmarks/bench_dem.py``.
 
 Equation of motion of droplet p (mass m [kg], drag coefficient beta [kg/s], fluid velocity u [m/s] at the droplet,
 both frozen over a step):
@@ -408,38 +408,6 @@ def contact_forces_half(position, velocity, diameter, mass, flags, partner, coun
     return worst.max()
 
 
-def contact_forces_reference(position, velocity, diameter, mass, flags, partner, count, pair_i, pair_j,
-                             stiffness_ref, diameter_ref, zeta, law, period):
-    """NumPy twin of the contact kernels over candidate pairs (pair_i, pair_j) (each pair once).
-
-    Returns (force (count, 3) [N], largest overlap ratio [-]).
-    """
-    law_force = {c.code: c.force for c in contacts.CONTACT_LAWS.values()}[law]
-    pos, vel = position[:count], velocity[:count]
-    d, m = diameter[:count], mass[:count]
-    i, j = np.asarray(pair_i), np.asarray(pair_j)
-    period = np.asarray(period, dtype=float)
-    delta = pos[j] - pos[i]
-    safe = np.where(period > 0.0, period, 1.0)
-    delta -= np.where(period > 0.0, period * np.rint(delta / safe), 0.0)
-    dist = np.sqrt(np.einsum("pk,pk->p", delta, delta))
-    reach = 0.5 * (d[i] + d[j])
-    mutual = ((flags[i] & COALESCING) != 0) & ((flags[j] & COALESCING) != 0) & (partner[i] == j) & (partner[j] == i)
-    touching = (dist < reach) & (dist > 0.0) & ~mutual
-    i, j, delta, dist, reach = i[touching], j[touching], delta[touching], dist[touching], reach[touching]
-    normal = delta / dist[:, None]
-    vn = np.einsum("pk,pk->p", vel[j] - vel[i], normal)
-    small = np.minimum(d[i], d[j])
-    k = stiffness_ref * (small / diameter_ref) ** 2
-    m_eff = m[i] * m[j] / (m[i] + m[j])
-    gamma = 2.0 * zeta * np.sqrt(k * m_eff)
-    f = np.array([law_force(o, v, kk, g) for o, v, kk, g in zip(reach - dist, vn, k, gamma)])
-    force = np.zeros((count, 3))
-    if f.size:
-        np.add.at(force, i, -f[:, None] * normal)
-        np.add.at(force, j, f[:, None] * normal)
-    worst = float(np.max((reach - dist) / small)) if f.size else 0.0
-    return force, worst
 
 
 # ---------------------------------------------------------------------------------------------------- walls
@@ -475,33 +443,6 @@ def wall_forces(position, velocity, diameter, mass, count, box_lower, box_upper,
     return worst.max()
 
 
-def wall_forces_reference(position, velocity, diameter, mass, count, box_lower, box_upper, periodic,
-                          absorbing_bottom, outlet_side, outlet_height, outlet_transverse, outlet_radius,
-                          stiffness_ref, diameter_ref, zeta, law):
-    """NumPy twin of :func:`wall_forces`: returns (wall force (count, 3) [N], largest overlap ratio [-])."""
-    law_force = np.vectorize({c.code: c.force for c in contacts.CONTACT_LAWS.values()}[law].py_func)
-    pos, vel, d, m = position[:count], velocity[:count], diameter[:count], mass[:count]
-    k = stiffness_ref * (d / diameter_ref) ** 2
-    gamma = 2.0 * zeta * np.sqrt(k * m)
-    force = np.zeros((count, 3))
-    worst = 0.0
-    for a in range(3):
-        if periodic[a]:
-            continue
-        for side, gap, sign in ((2 * a, pos[:, a] - box_lower[a], 1.0), (2 * a + 1, box_upper[a] - pos[:, a], -1.0)):
-            overlap = 0.5 * d - gap
-            active = overlap > 0.0
-            if side == Z_LOW and absorbing_bottom:
-                active[:] = False
-            if side == outlet_side:
-                transverse = pos[:, 1] if side < Y_LOW else pos[:, 0]
-                hole = (pos[:, 2] - outlet_height) ** 2 + (transverse - outlet_transverse) ** 2 < outlet_radius**2
-                active &= ~hole
-            f = np.where(active, law_force(overlap, sign * vel[:, a], k, gamma), 0.0)
-            force[:, a] += sign * f
-            if active.any():
-                worst = max(worst, float(np.max(overlap[active] / d[active])))
-    return force, worst
 
 
 # ---------------------------------------------------------------------------------------------------- integrator
@@ -784,29 +725,6 @@ def finish_even_slabs(position, velocity, force, mass, drag, fluid_velocity, bod
     return math.sqrt(travel.max())
 
 
-def integrate_reference(position, velocity, force_old, force_new_of, mass, beta, fluid_velocity, body_acceleration,
-                        h, count):
-    """NumPy twin of one whole step; ``force_new_of(position, velocity)`` gives the force at the new state.
-
-    Returns (position, velocity, impulse) as new arrays; the drag factors use expm1 directly (no series).
-    """
-    x, v = position[:count].copy(), velocity[:count].copy()
-    m = mass[:count, None]
-    u = np.broadcast_to(fluid_velocity, (count, 3)) if len(fluid_velocity) == 1 else fluid_velocity[:count]
-    rate = beta[:count, None] / m
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = rate * h
-        phi1 = np.where(z > 0, -np.expm1(-z) / np.where(z > 0, rate, 1.0), h)
-        phi2 = np.where(z > 0, (h - phi1) / np.where(z > 0, rate, 1.0), 0.5 * h * h)
-    e = np.exp(-z)
-    acc_old = force_old[:count] / m + body_acceleration
-    v_start = v.copy()
-    x = x + u * h + (v - u) * phi1 + acc_old * phi2
-    v = u + (v - u) * e + acc_old * (phi1 - phi2 / h)
-    acc_new = force_new_of(x, v) / m + body_acceleration
-    v = v + acc_new * phi2 / h
-    impulse = m * (v - v_start) - m * h * 0.5 * (acc_old + acc_new)
-    return x, v, impulse
 
 
 # ---------------------------------------------------------------------------------------------------- diagnostics
@@ -836,6 +754,10 @@ def droplet_masses(diameter, density, count, mass):
 
 
 # ---------------------------------------------------------------------------------------------------- orchestration
+#: The ``impulse`` argument that tracks no drag impulse.
+NO_IMPULSE = np.zeros((0, 3))
+
+
 class DemStepper:
     """Advances the droplets of a :class:`fulldem.droplets.DropletStore` by DEM steps.
 
@@ -1173,38 +1095,5 @@ class DemStepper:
                                         max(2 * longest, self.candidates.shape[1])), dtype=np.int32)
 
 
-NO_IMPULSE = np.zeros((0, 3))
 
 
-def run_dem(store, steps, h, box_size, stiffness_ref, diameter_ref, restitution, wall_restitution, skin,
-            body_acceleration, viscosity, report_steps=(), half_list=True, track_impulse=True):
-    """DEM-only run in a closed box with all six walls and linear Stokes drag beta = 3 pi mu d in still fluid.
-
-    Returns a dict: ``loop_seconds`` (the stepping loop only, set-up and first build excluded), ``rebuilds``
-    (list builds during the loop), ``kinetic_energy`` {step: J} at ``report_steps``, ``max_overlap_ratio``,
-    ``impulse`` (the drag impulses, (n, 3) [N s], if tracked) and the ``stepper``. Used by
-    ``benchmarks/bench_dem.py``.
-    """
-    stepper = DemStepper(store, (0.0, 0.0, 0.0), box_size, (False, False, False), h, stiffness_ref, diameter_ref,
-                         restitution, skin, body_acceleration, wall_restitution=wall_restitution,
-                         half_list=half_list)
-    stepper.droplets_changed()
-    n = store.count
-    stepper.set_drag(3.0 * math.pi * viscosity * store.diameter)
-    still = np.zeros((1, 3))
-    impulse = np.zeros((store.capacity, 3)) if track_impulse else NO_IMPULSE
-    builds_before = stepper.neighbours.builds
-    energies = {}
-    loop = 0.0
-    report = sorted({int(s) for s in report_steps if 0 < int(s) <= steps})
-    done = 0
-    for target in report + [steps]:
-        t0 = time.perf_counter()
-        stepper.advance(target - done, still, impulse)
-        loop += time.perf_counter() - t0
-        done = max(done, target)
-        if target in report:
-            energies[target] = kinetic_energy(store.velocity, stepper.mass, n)
-    return {"loop_seconds": loop, "rebuilds": stepper.neighbours.builds - builds_before,
-            "kinetic_energy": energies, "max_overlap_ratio": stepper.max_overlap_ratio,
-            "impulse": impulse[:n] if track_impulse else None, "stepper": stepper}

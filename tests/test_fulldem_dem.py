@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from fulldem import contacts, dem
+from fulldem import contacts, dem, reference
 from fulldem import neighbours as nb
 from fulldem.droplets import COALESCING, DropletStore
 
@@ -266,7 +266,7 @@ def test_contact_kernels_match_numpy_twin(periodic, half):
     else:
         worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, zeta, force)
     bi, bj = nb.brute_force_pairs(store.position, store.diameter, n, 0.0, box, periodic)
-    ref, ref_worst = dem.contact_forces_reference(store.position, store.velocity, store.diameter, mass, store.flags,
+    ref, ref_worst = reference.contact_forces_reference(store.position, store.velocity, store.diameter, mass, store.flags,
                                                   store.partner, n, bi, bj, 3.0, 0.5e-3, zeta, law, nl.period)
     assert ref_worst > 0.02
     assert worst == pytest.approx(ref_worst, rel=1e-12)
@@ -350,7 +350,7 @@ def test_wall_kernel_matches_numpy_twin(absorbing_bottom):
     before = force.copy()
     worst = dem.wall_forces(pos, vel, d, mass, n, box_lower, box_upper, periodic, absorbing_bottom, *outlet, 2.0,
                             0.5e-3, 0.3, 0, 4, force)
-    ref, ref_worst = dem.wall_forces_reference(pos, vel, d, mass, n, box_lower, box_upper, periodic,
+    ref, ref_worst = reference.wall_forces_reference(pos, vel, d, mass, n, box_lower, box_upper, periodic,
                                                absorbing_bottom, *outlet, 2.0, 0.5e-3, 0.3, 0)
     np.testing.assert_allclose(force - before, ref, rtol=1e-12, atol=1e-20)
     assert worst == pytest.approx(ref_worst, rel=1e-12)
@@ -407,7 +407,7 @@ def test_integrator_kernels_match_numpy_twin(uniform_fluid):
     moved = dem.integrate_initial(x, v, force_old, mass, drag, fluid, body, h, n, 3, impulse)
     force_new = force_new_of(x, v)
     dem.integrate_final(v, force_new, mass, drag, body, h, n, impulse)
-    x_ref, v_ref, j_ref = dem.integrate_reference(pos, vel, force_old, force_new_of, mass, beta, fluid, body, h, n)
+    x_ref, v_ref, j_ref = reference.integrate_reference(pos, vel, force_old, force_new_of, mass, beta, fluid, body, h, n)
     np.testing.assert_allclose(x, x_ref, rtol=1e-13, atol=1e-18)
     np.testing.assert_allclose(v, v_ref, rtol=1e-12, atol=1e-18)
     np.testing.assert_allclose(impulse, j_ref, rtol=1e-9, atol=1e-12 * np.abs(mass[:, None] * vel).max())
