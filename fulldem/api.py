@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from settler.cases import Case, load_case, parse_override
+from settler.cases import Case, case_with_overrides, load_case
 from settler.output import read_time_series
 
 
@@ -53,15 +53,7 @@ def setup(case: str | os.PathLike | Case, overrides: dict | list | None = None, 
     """
     from .driver import check_case
 
-    merged = {}
-    if isinstance(overrides, (list, tuple)):
-        overrides = dict(parse_override(o) for o in overrides)
-    merged.update(overrides or {})
-    merged.update({k.replace("__", "."): v for k, v in keyword_overrides.items()})
-    if isinstance(case, Case):
-        case = case.replace(**{k.replace(".", "__"): v for k, v in merged.items()}) if merged else case
-    else:
-        case = load_case(case, merged)
+    case = case_with_overrides(case, overrides, **keyword_overrides)
     check_case(case)
     return Setup(case, droplets, feed)
 

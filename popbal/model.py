@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from settler.cases import Case, CaseError, load_case
+from settler.cases import Case, CaseError, case_with_overrides
 from settler.derived import Quantity, settling_velocity
 from settler.physics import (COALESCENCE_RULES, PROBABILITY_FORMS, STANDARD_GRAVITY, density_at_age, droplet_rate,
                              relative_diameter_at_age, scale_factor_pdf)
@@ -92,17 +92,7 @@ def setup(case: str | os.PathLike | Case, overrides: dict | list | None = None, 
     Overrides as ``{"popbal.end_time": 10}``, ``["popbal.end_time=10"]`` or keywords ``popbal__end_time=10``.
     Raises :class:`settler.cases.CaseError` naming the key, the value and what is allowed.
     """
-    merged = {}
-    if isinstance(overrides, (list, tuple)):
-        from settler.cases import parse_override
-
-        overrides = dict(parse_override(o) for o in overrides)
-    merged.update(overrides or {})
-    merged.update({k.replace("__", "."): v for k, v in keyword_overrides.items()})
-    if isinstance(case, Case):
-        case = case.replace(**{k.replace(".", "__"): v for k, v in merged.items()}) if merged else case
-    else:
-        case = load_case(case, merged)
+    case = case_with_overrides(case, overrides, **keyword_overrides)
     return build(case)
 
 

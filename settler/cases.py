@@ -367,6 +367,19 @@ def load_case(name_or_path: str | os.PathLike, overrides: dict[str, Any] | list[
     return resolve(raw, overrides, str(path))
 
 
+def case_with_overrides(case: "str | os.PathLike | Case", overrides: dict | list | None = None,
+                        **keyword_overrides) -> Case:
+    """A validated case from a preset name, a TOML path or a :class:`Case`, with overrides given as
+    ``{"section.key": value}``, ``["section.key=value"]`` or keywords ``section__key=value`` (later ones win): the
+    one way the engines' Python APIs (``popbal.setup``, ``fulldem.setup``) take a case."""
+    if isinstance(overrides, (list, tuple)):
+        overrides = dict(parse_override(o) for o in overrides)
+    merged = {**(overrides or {}), **{k.replace("__", "."): v for k, v in keyword_overrides.items()}}
+    if isinstance(case, Case):
+        return case.replace(**{k.replace(".", "__"): v for k, v in merged.items()}) if merged else case
+    return load_case(case, merged)
+
+
 def resolve(raw: dict, overrides=None, source: str = "") -> Case:
     """Merge a raw case dict over its property set, apply overrides and validate."""
     if isinstance(overrides, (list, tuple)):
