@@ -26,6 +26,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from settler.physics import merged_diameter_v
+
 #: Flag bit: the droplet is marked for coalescence with ``partner`` (they no longer repel each other).
 COALESCING = 1
 
@@ -152,8 +154,9 @@ class DropletStore:
         self.position[keep] = wk * self.position[keep] + wg * self.position[gone]
         self.velocity[keep] = wk * self.velocity[keep] + wg * self.velocity[gone]
         self.age[keep] = wk[:, 0] * self.age[keep] + wg[:, 0] * self.age[gone]
-        self.original_diameter[keep] = np.cbrt(self.original_diameter[keep] ** 3 + self.original_diameter[gone] ** 3)
-        self.diameter[keep] = np.cbrt(volume)
+        self.original_diameter[keep] = merged_diameter_v(self.original_diameter[keep], self.original_diameter[gone])
+        self.diameter[keep] = merged_diameter_v(self.diameter[keep], self.diameter[gone])
+        volume = self.diameter[keep] ** 3  # the merged droplet's own volume (x pi/6), so density x volume = mass
         self.density[keep] = mass / volume
         n = self.count
         partnered = np.isin(self.partner[:n], both)
