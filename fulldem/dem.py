@@ -40,7 +40,6 @@ force except drag and a_body), ``drag`` (cap, 3) the factors (E, phi1, phi2) of 
 from __future__ import annotations
 
 import math
-import time
 
 import numba
 import numpy as np
@@ -49,6 +48,7 @@ from numba import njit, prange
 from . import contacts
 from .droplets import COALESCING
 from .neighbours import NeighbourList, permute_rows, wrap_positions
+from .tuning import PARALLEL_MIN_DROPLETS, THREAD_PROBE_EVERY, THREAD_PROBE_STEPS, ThreadChoice  # noqa: F401
 
 #: LLVM fast-math flags of the hot kernels: fused multiply-add and reciprocal; no reassociation (the pair forces
 #: stay exactly antisymmetric, so momentum is conserved to round-off) and no assumption that values are finite.
@@ -208,22 +208,6 @@ def wall_planes(box_lower, box_upper, periodic, absorbing_bottom):
     if absorbing_bottom:
         lower[2] = -np.inf
     return lower, upper
-
-
-#: Below this many droplets the stepper runs its kernels on one thread: a parallel launch costs more than it saves,
-#: and on a machine shared with other busy processes a small parallel step waits for a descheduled thread.
-PARALLEL_MIN_DROPLETS = 2000
-
-#: Steps between two timings of one thread against all (``DemStepper(threads=None)``), and steps per timing.
-THREAD_PROBE_EVERY = 500
-THREAD_PROBE_STEPS = 10
-
-
-def _compose(order, new):
-    """Permutation after two re-sortings: new p is old order[new[p]] (None: no re-sorting)."""
-    if new is None:
-        return order
-    return new if order is None else order[new]
 
 
 def _chunks(count):
@@ -765,7 +749,7 @@ class DemStepper:
     positions, second half (:meth:`step` for one, :meth:`advance` for several in a row, faster). The list is checked
     exactly (:meth:`NeighbourList.needs_rebuild`) only once the sum of the steps' largest displacements exceeds
     skin/2, so most steps skip the check; a rebuild may re-sort the droplets by cell (``sort_on_rebuild``) for memory
-    locality. Below :data:`PARALLEL_MIN_DROPLETS` droplets the kernels run on one thread.
+    locality. Threads are chosen by :class:`fulldem.tuning.ThreadChoice` (one below a few thousand droplets).
 
     Parameters: box ``lower``/``size`` (3,) [m], ``periodic`` (3,) bool, step ``h`` [s], contact ``stiffness_ref``
     [N/m] at ``diameter_ref`` [m], ``restitution`` [-] of droplet pairs and ``wall_restitution`` [-] (default: the
@@ -808,8 +792,7 @@ class DemStepper:
         self.outlet = (int(side), float(height), float(transverse), float(radius))
         self.planes = wall_planes(self.lower, self.upper, self.periodic, self.absorbing_bottom)
         self.sort_on_rebuild = bool(sort_on_rebuild)
-        self.threads = None if threads is None else max(1, int(threads))
-        self._auto_threads = None
+        self.thread_choice = ThreadChoice(threads)
         self.neighbours = NeighbourList(self.lower, self.size, self.periodic, skin, half=half_list,
                                         cell_diameter=cell_diameter)
         self.mass = np.zeros(0)
@@ -938,11 +921,8 @@ class DemStepper:
         advance's steps (and any :meth:`compute_forces` since the advance began). Returns the droplet permutation
         if the droplets were re-sorted (new p is old order[p]), else None.
 
-        Threads: one below :data:`PARALLEL_MIN_DROPLETS` droplets; else ``threads``, or when None the faster of one
-        and all threads, re-timed every :data:`THREAD_PROBE_EVERY` steps in long advances (on a machine shared with
-        other busy processes, threads that wait for each other at every phase can be slower than one). The results
-        do not depend on the thread count (the timed choice splits the advance into segments, which changes them at
-        round-off: fused multiply-adds fall differently at segment ends).
+        Threads: chosen by :class:`fulldem.tuning.ThreadChoice` (one below
+        :data:`fulldem.tuning.PARALLEL_MIN_DROPLETS` droplets; else ``threads``, or the faster of one and all).
         """
         if not self.ready:
             self.droplets_changed()
@@ -952,38 +932,8 @@ class DemStepper:
             return None
         steps = int(steps)
         self.peak_overlap_ratio = 0.0
-        threads = numba.get_num_threads()
-        if self.store.count < PARALLEL_MIN_DROPLETS or threads == 1:
-            fixed = 1
-        elif self.threads is not None:
-            fixed = min(self.threads, threads)
-        elif steps < 4 * THREAD_PROBE_STEPS:
-            fixed = self._auto_threads or threads
-        else:
-            fixed = None
-        order = None
-        try:
-            if fixed is not None:
-                numba.set_num_threads(fixed)
-                return self._advance(steps, fluid_velocity, impulse)
-            done = 0
-            while done < steps:
-                if done % THREAD_PROBE_EVERY == 0 and steps - done >= 4 * THREAD_PROBE_STEPS:
-                    timing = {}
-                    for candidate in (1, threads):
-                        numba.set_num_threads(candidate)
-                        start = time.perf_counter()
-                        order = _compose(order, self._advance(THREAD_PROBE_STEPS, fluid_velocity, impulse))
-                        timing[candidate] = time.perf_counter() - start
-                        done += THREAD_PROBE_STEPS
-                    self._auto_threads = min(timing, key=timing.get)
-                chunk = min(steps - done, THREAD_PROBE_EVERY - done % THREAD_PROBE_EVERY)
-                numba.set_num_threads(self._auto_threads)
-                order = _compose(order, self._advance(chunk, fluid_velocity, impulse))
-                done += chunk
-            return order
-        finally:
-            numba.set_num_threads(threads)
+        return self.thread_choice.run(self.store.count, steps,
+                                      lambda k: self._advance(k, fluid_velocity, impulse))
 
     def _advance(self, steps, fluid_velocity, impulse):
         s, n, nl = self.store, self.store.count, self.neighbours

@@ -48,6 +48,7 @@ from .feeding import classify_exits, draw_inlet_candidates, place_without_overla
 from .forces import DRAG_LAWS, drag_coefficients
 from .grid import Grid
 from .submodels import submodels_for
+from .tuning import SKIN_MIN, SORT_INTERVAL, skin_for
 
 #: Ratios sigma/h at which the grid's self-mobility factor is tabulated (see fulldem.coupling).
 MOBILITY_RATIOS = np.array([0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0])
@@ -59,20 +60,6 @@ DEPOSIT_COMPONENTS = np.array([0, 1, 2, 3, 0, 1, 2], dtype=np.int64)
 #: Fields interpolated at x^n after the fluid step: fluid velocity and pressure force on the faces, volume fraction
 #: at the cells.
 INTERPOLATE_COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 3], dtype=np.int64)
-#: Droplets are re-sorted by neighbour cell (memory locality of the DEM and coupling passes) in every step in which
-#: some entered or left, and otherwise every this many fluid steps (they move a small fraction of a cell per step);
-#: a sort also rebuilds the neighbour list.
-SORT_INTERVAL = 50
-
-#: Neighbour-list skin, in mean feed diameters: at least SKIN_MIN, at most SKIN_MAX, otherwise SKIN_TRAVEL times
-#: the largest droplet speed times dt, chosen at each re-sort of the droplets. The list must be rebuilt once a
-#: droplet has travelled skin/2; a fed run rebuilds it every step anyway (insertions), so a skin that lasts one
-#: fluid step (skin/2 = 1.25 v_max dt) saves a second build, while a larger one would only lengthen the rows the
-#: contact loop filters. Measured on the simple case at 172 000 droplets (54 mm/s in its channel):
-#: 330-340 ms per step with the fixed 0.25 d skin, 270-280 ms with 0.5 d.
-SKIN_MIN = 0.25
-SKIN_MAX = 1.0
-SKIN_TRAVEL = 2.5
 
 
 @njit(cache=True, parallel=True)
@@ -532,8 +519,8 @@ class Simulation:
             self.counters.merges += len(order)
 
     def skin_for(self, speed):
-        """Neighbour-list skin [m] for droplets moving at most ``speed`` [m/s] (see :data:`SKIN_TRAVEL`)."""
-        return float(np.clip(SKIN_TRAVEL * speed * self.dt, SKIN_MIN * self.d_ref, SKIN_MAX * self.d_ref))
+        """Neighbour-list skin [m] for droplets moving at most ``speed`` [m/s] (see :func:`fulldem.tuning.skin_for`)."""
+        return skin_for(speed, self.dt, self.d_ref)
 
     # ------------------------------------------------------------------------------------------------ diagnostics
     def momentum(self):

@@ -1,0 +1,98 @@
+"""Machine tuning, kept apart from the physics: how many threads a DEM advance uses, how thick the neighbour-list
+skin is and how often droplets are re-sorted in memory. None of it changes what a run computes beyond round-off
+(the thread choice splits an advance into segments); all of it changes how fast it runs.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numba
+import numpy as np
+
+#: Below this many droplets the DEM kernels run on one thread: a parallel launch costs more than it saves, and on a
+#: machine shared with other busy processes a small parallel step waits for a descheduled thread.
+PARALLEL_MIN_DROPLETS = 2000
+
+#: Steps between two timings of one thread against all (``ThreadChoice(threads=None)``), and steps per timing.
+THREAD_PROBE_EVERY = 500
+THREAD_PROBE_STEPS = 10
+
+#: Droplets are re-sorted by neighbour cell (memory locality of the DEM and coupling passes) in every fluid step in
+#: which some entered or left, and otherwise every this many fluid steps (they move a small fraction of a cell per
+#: step); a sort also rebuilds the neighbour list.
+SORT_INTERVAL = 50
+
+#: Neighbour-list skin, in mean feed diameters: at least SKIN_MIN, at most SKIN_MAX, otherwise SKIN_TRAVEL times
+#: the largest droplet speed times dt, chosen at each re-sort of the droplets. The list must be rebuilt once a
+#: droplet has travelled skin/2; a fed run rebuilds it every step anyway (insertions), so a skin that lasts one
+#: fluid step (skin/2 = 1.25 v_max dt) saves a second build, while a larger one would only lengthen the rows the
+#: contact loop filters. Measured on the simple case at 172 000 droplets (54 mm/s in its channel):
+#: 330-340 ms per step with the fixed 0.25 d skin, 270-280 ms with 0.5 d.
+SKIN_MIN = 0.25
+SKIN_MAX = 1.0
+SKIN_TRAVEL = 2.5
+
+
+def skin_for(speed, dt, diameter_ref) -> float:
+    """Neighbour-list skin [m] for droplets moving at most ``speed`` [m/s] over fluid steps of ``dt`` [s], in units
+    of the mean feed diameter ``diameter_ref`` [m] (see :data:`SKIN_TRAVEL`)."""
+    return float(np.clip(SKIN_TRAVEL * speed * dt, SKIN_MIN * diameter_ref, SKIN_MAX * diameter_ref))
+
+
+def compose(order, new):
+    """Permutation after two re-sortings: new p is old order[new[p]] (None: no re-sorting)."""
+    if new is None:
+        return order
+    return new if order is None else order[new]
+
+
+class ThreadChoice:
+    """How many threads the DEM kernels of an advance run on.
+
+    One below :data:`PARALLEL_MIN_DROPLETS` droplets; else ``threads`` when given, or when None the faster of one and
+    all threads, re-timed every :data:`THREAD_PROBE_EVERY` steps in long advances (on a machine shared with other
+    busy processes, threads that wait for each other at every phase can be slower than one). The results do not
+    depend on the thread count (the timed choice splits the advance into segments, which changes them at round-off:
+    fused multiply-adds fall differently at segment ends).
+    """
+
+    def __init__(self, threads=None):
+        self.threads = None if threads is None else max(1, int(threads))
+        self.timed = None  # the faster thread count of the last timing
+
+    def run(self, count, steps, advance):
+        """Run ``advance(k)`` (k steps for ``count`` droplets; returns a droplet permutation or None) for ``steps``
+        steps in all, on the chosen threads; returns the composed permutation."""
+        threads = numba.get_num_threads()
+        if count < PARALLEL_MIN_DROPLETS or threads == 1:
+            fixed = 1
+        elif self.threads is not None:
+            fixed = min(self.threads, threads)
+        elif steps < 4 * THREAD_PROBE_STEPS:
+            fixed = self.timed or threads
+        else:
+            fixed = None
+        order = None
+        try:
+            if fixed is not None:
+                numba.set_num_threads(fixed)
+                return advance(steps)
+            done = 0
+            while done < steps:
+                if done % THREAD_PROBE_EVERY == 0 and steps - done >= 4 * THREAD_PROBE_STEPS:
+                    timing = {}
+                    for candidate in (1, threads):
+                        numba.set_num_threads(candidate)
+                        start = time.perf_counter()
+                        order = compose(order, advance(THREAD_PROBE_STEPS))
+                        timing[candidate] = time.perf_counter() - start
+                        done += THREAD_PROBE_STEPS
+                    self.timed = min(timing, key=timing.get)
+                chunk = min(steps - done, THREAD_PROBE_EVERY - done % THREAD_PROBE_EVERY)
+                numba.set_num_threads(self.timed)
+                order = compose(order, advance(chunk))
+                done += chunk
+            return order
+        finally:
+            numba.set_num_threads(threads)
