@@ -639,6 +639,12 @@ def filtered_self_weight(position, count, spacing, lower, periodic, gx, gy, gz, 
             out[p] = acc
 
 
+def filtered_width_allowed(sigma_cells) -> bool:
+    """Whether the filtered kernel can have width sigma_cells [cells]: its trilinear step alone has variance 1/6
+    cell^2 per axis, so the Gaussian filter after it needs sigma_cells^2 > 1/6."""
+    return sigma_cells**2 > 1.0 / 6.0 + 1e-12
+
+
 class FilteredKernel:
     """The two-step coupling kernel: trilinear (cloud-in-cell) weights to the nearest nodes of each staggered array,
     then a separable discrete Gaussian filter G on the grid (the "two-step" filtering of Capecelatro & Desjardins
@@ -655,7 +661,7 @@ class FilteredKernel:
     """
 
     def __init__(self, shape, periodic, sigma_cells, cut=DEFAULT_CUT):
-        if sigma_cells**2 <= 1.0 / 6.0 + 1e-12:
+        if not filtered_width_allowed(sigma_cells):
             raise ValueError(f"FilteredKernel: sigma_cells = {sigma_cells} must exceed 1/sqrt(6) = 0.408")
         self.shape = tuple(int(n) for n in shape)
         self.periodic = tuple(bool(p) for p in periodic)

@@ -42,6 +42,7 @@ from settler.output import (OutputError, atomic_write_text, mass_balance_error, 
                             read_time_series, time_series_frame, to_json, write_run_metadata, write_time_series)
 
 from . import fluid as fl
+from .coupling import filtered_width_allowed
 from .droplet_list import DropletListError, read_droplet_list
 from .io import CheckpointError, Progress, SnapshotWriter, load_checkpoint, save_checkpoint
 from .stepper import Counters, Simulation
@@ -110,7 +111,7 @@ def check_case(case) -> None:
                         f"= {cells:.3g} cells needs about {need / 2**30:.3g} GiB, more than {MEMORY_FRACTION:.0%} of this "
                         f"machine's {have / 2**30:.3g} GiB; allowed: a larger cell_size (at most "
                         f"{MEMORY_FRACTION * have * cells / need:.3g} cells)")
-    if fd.kernel == "filtered" and fd.sigma_cells**2 <= 1.0 / 6.0 + 1e-12:
+    if fd.kernel == "filtered" and not filtered_width_allowed(fd.sigma_cells):
         raise CaseError(f"fulldem.sigma_cells = {fd.sigma_cells:g}: the filtered kernel's trilinear step alone is "
                         f"wider; allowed: sigma_cells > 1/sqrt(6) = {1 / math.sqrt(6):.4f}, or fulldem.kernel = 'direct'")
 
