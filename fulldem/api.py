@@ -94,7 +94,7 @@ def load(out: str | os.PathLike) -> Result:
                   read_json("summary.json"))
 
 
-def run(setup: Setup | Case | str, out: str | os.PathLike, *, end_time: float | None = None, resume: bool = False,
+def run(what: Setup | Case | str, out: str | os.PathLike, *, end_time: float | None = None, resume: bool = False,
         overwrite: bool = False, progress: bool = True, log=print, command: str | None = None,
         **overrides) -> Result:
     """Run a :class:`Setup` (or a case / preset name / path, with ``overrides`` as in :func:`setup`) into folder
@@ -106,10 +106,11 @@ def run(setup: Setup | Case | str, out: str | os.PathLike, *, end_time: float | 
     """
     from .driver import run_case
 
-    if not isinstance(setup, Setup):
-        setup = globals()["setup"](setup, **overrides)
-    elif overrides:
-        raise TypeError(f"run: overrides {sorted(overrides)} with a Setup; give them to fulldem.setup")
-    run_case(setup.case, out, end_time=end_time, resume=resume, droplets=setup.droplets, feed=setup.feed,
+    if isinstance(what, Setup):
+        if overrides:
+            raise TypeError(f"run: overrides {sorted(overrides)} with a Setup; give them to fulldem.setup")
+    else:
+        what = setup(what, **overrides)
+    run_case(what.case, out, end_time=end_time, resume=resume, droplets=what.droplets, feed=what.feed,
              progress=progress, log=log, overwrite=overwrite, command=command)
     return load(out)

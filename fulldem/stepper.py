@@ -174,7 +174,6 @@ class Simulation:
         self.boundary = fl.make_boundary(self.grid, inlet=self.bounds.fluid_inlet(),
                                          outlet=self.bounds.fluid_outlet(), inflow_flux=self.bounds.inflow_flux)
         self.fluid = fl.rest_state(self.grid)
-        self.absorbing_bottom = self.bounds.absorbing_bottom
 
         # feed
         f = case.feed
@@ -201,7 +200,7 @@ class Simulation:
         self.d_ref = d_ref
         self.dem = DemStepper(self.store, self.lower, self.grid.size, self.periodic, self.h, self.stiffness_ref,
                               d_ref, fd.restitution, SKIN_MIN * d_ref, np.zeros(3),
-                              absorbing_bottom=self.absorbing_bottom, outlet=self.bounds.contact_outlet(),
+                              absorbing_bottom=self.bounds.absorbing_bottom, outlet=self.bounds.contact_outlet(),
                               sort_on_rebuild=False)
 
         # coupling tables and work arrays
