@@ -25,6 +25,8 @@ import os
 
 import numba
 
+import settler  # noqa: F401 (first: it points Numba's cache at this source version, see settler.numba_cache)
+
 #: The threading layers fulldem asks numba for, best first (see the module docstring).
 THREADING_LAYER_PRIORITY = ("omp", "workqueue", "tbb")
 

@@ -6,3 +6,9 @@ thermochemistry (:mod:`settler.thermo`) and the ``settler`` command line. The en
 """
 
 __version__ = "0.1.0"
+
+# Numba's cache in a folder per source version (kernels that inline other files' functions are otherwise not
+# recompiled when those change); before any kernel of settler, fulldem or popbal is compiled.
+from .numba_cache import configure as _configure_numba_cache  # noqa: E402
+
+_configure_numba_cache()
