@@ -1,8 +1,8 @@
 """DEM kernels for matte droplets: contact and wall forces, and an exponential velocity-Verlet integrator.
 
-Kernels are ``@njit(cache=True)`` functions of arrays and scalars (SI units); :class:`DemStepper` orchestrates them.
-The contact, wall and integrator kernels have plain NumPy twins in :mod:`fulldem.reference` that the tests compare
-them with; the DEM-only benchmark's driver is ``benchmarks/bench_dem.py``.
+Kernels are ``@njit(cache=True)`` functions of arrays and small records (SI units); :class:`DemStepper` orchestrates
+them. The contact, wall and integrator kernels have plain NumPy twins in :mod:`fulldem.reference` that the tests
+compare them with; the DEM-only benchmark's driver is ``benchmarks/bench_dem.py``.
 
 Equation of motion of droplet p (mass m [kg], drag coefficient beta [kg/s], fluid velocity u [m/s] at the droplet,
 both frozen over a step):
@@ -22,7 +22,8 @@ terminal velocity u + a tau exactly and follows the analytic trajectory, and for
 it *is* velocity Verlet: symplectic, second order (restitution 0.505 for e = 0.5 at 29 steps per contact). A
 one-call step with the force frozen over the whole step -- x + v h + a h^2/2, v + a h in the beta = 0 limit -- gains
 energy in every contact step (restitution 0.550 in the same collision); hence the two halves. Consecutive steps fuse
-the second half of one with the first half of the next (:func:`integrate_kick_drift`, :func:`step_fused`).
+the second half of one with the first half of the next (:func:`integrate_kick_drift`, :func:`step_fused`,
+:func:`step_half`).
 
 The drag impulse exchanged over the step, J = beta integral (u - v) dt = m (v_new - v) - m h (a_old + a_new)/2, is
 added per droplet to an ``impulse`` array the caller zeroes, so the fluid can receive exactly -J. Over consecutive
@@ -31,15 +32,28 @@ advance adds m v at the end, and the steps between add only the force share -h (
 droplet without contacts when there is no body acceleration (the coupled stepper folds it into the fluid velocity):
 its impulse row is then not touched in the sub-steps. The array holds J only once the advance has ended.
 
-Work arrays (prepared by the caller): ``mass`` (cap,) [kg], ``force`` (cap, 3) [N] (contact + wall + any other
-force except drag and a_body), ``drag`` (cap, 3) the factors (E, phi1, phi2) of :func:`drag_factors_into`,
-``impulse`` (cap, 3) [N s], ``damping`` (list entries,) [N s/m] of :func:`pair_damping`. Geometry: ``period`` (3,)
-[m] (box length on periodic axes, 0 on bounded ones) and ``inverse_period`` (3,) [1/m] (0 on bounded axes).
+Records. The kernels take the droplets' ``position`` and ``velocity`` (cap, 3) and the work array ``force`` (cap, 3)
+[N] (contact + wall + any other force except drag and a_body) as arrays, and everything else in four records:
+
+* :class:`Bodies` -- per-droplet properties fixed over a step: contact diameter, mass, coalescence flags and partner;
+* :class:`Contacts` -- the neighbour list (rows, per-entry dashpot coefficients), the periodic images, the contact
+  law, and the first-contact record of the coalescence submodel;
+* :class:`Walls` -- the box's planes, the outlet hole and the wall law;
+* :class:`Motion` -- the integrator's drag factors, fluid velocity, body acceleration, step and impulse accumulator.
+
+One contact-row body (:func:`_row`) serves the full list (each droplet sums its own row) and the half list (each pair
+once, the reaction subtracted from the partner).
+
+Records are read-only inside parallel loops: numba (0.6x) loses writes made through a record's array field inside a
+``prange`` loop (written values vanish, no error). A kernel that writes an array of a record (``Motion.impulse``,
+``Contacts.approach``) takes an alias of it *before* its parallel loop and passes that alias on
+(tests/test_fulldem_dem.py checks every written array).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -61,6 +75,123 @@ X_LOW, X_HIGH, Y_LOW, Y_HIGH, Z_LOW, Z_HIGH = range(6)
 # for z <= 0.5 with 16 terms (0.5^16/18! < 1e-20).
 _SERIES = np.array([1.0 / math.factorial(k + 2) for k in range(16)])
 _SERIES_LIMIT = 0.5
+
+
+# ---------------------------------------------------------------------------------------------------- records
+class Bodies(NamedTuple):
+    """Per-droplet properties the kernels read, fixed over a step (arrays of the store's capacity).
+
+    ``diameter`` [m]: the *contact* diameter (the store's ``contact_diameter``: the true diameter, or a coalescing
+    droplet's grown one); ``mass`` [kg]: from the true diameter; ``flags`` int32 and ``partner`` int64: coalescence
+    marks (mutual partners do not touch).
+    """
+
+    diameter: np.ndarray
+    mass: np.ndarray
+    flags: np.ndarray
+    partner: np.ndarray
+
+
+class Contacts(NamedTuple):
+    """The neighbour list and the droplet-droplet contact law, as the contact kernels read them.
+
+    ``start`` (n + 1,) int64 and ``index`` (entries,) int32: the list's rows; ``damping`` (entries,) [N s/m]: each
+    entry's dashpot coefficient (:func:`pair_damping`); ``period`` (3,) [m] (0 on bounded axes) and
+    ``inverse_period`` (3,) [1/m]; ``periodic_any``: some axis is periodic; ``stiffness_ref`` [N/m] at
+    ``diameter_ref`` [m]; ``law``: a code of :data:`fulldem.contacts.CONTACT_LAWS`. ``approach`` (entries,) [m/s]:
+    the first-contact record -- a kernel writes the approach speed of each touching pair at its first contact (the
+    pair's overlap is less than its approach speed times ``h`` [s], so one step earlier they did not touch) where
+    neither droplet is marked for coalescence, into the pair's entry (threads never write the same entry); entries
+    not written keep their value (the caller sets -1). An array with no entries: nothing is recorded.
+    """
+
+    start: np.ndarray
+    index: np.ndarray
+    damping: np.ndarray
+    period: np.ndarray
+    inverse_period: np.ndarray
+    periodic_any: bool
+    stiffness_ref: float
+    diameter_ref: float
+    law: int
+    approach: np.ndarray
+    h: float
+
+
+class Walls(NamedTuple):
+    """The box's planes and the outlet hole, as the wall kernels read them (:func:`walls_record`).
+
+    ``on``: some plane exists; ``lower``/``upper`` (3,) [m]: the planes' positions, -inf/+inf where there is none
+    (periodic axis, absorbing bottom); outlet hole of radius ``outlet_radius`` [m] in side wall ``outlet_side``
+    (0..3: x-, x+, y-, y+; -1: none) centred at height ``outlet_height`` [m] and transverse coordinate
+    ``outlet_transverse`` [m] (y on x walls, x on y walls); the wall law is the pair law (``law``, ``stiffness_ref``
+    [N/m] at ``diameter_ref`` [m]) with m_eff = m and damping ratio ``zeta`` [-].
+    """
+
+    on: bool
+    lower: np.ndarray
+    upper: np.ndarray
+    outlet_side: int
+    outlet_height: float
+    outlet_transverse: float
+    outlet_radius: float
+    stiffness_ref: float
+    diameter_ref: float
+    zeta: float
+    law: int
+
+
+class Motion(NamedTuple):
+    """What the integrator needs besides positions, velocities, masses and forces.
+
+    ``drag`` (cap, 3): the factors (E, phi1, phi2) of :func:`drag_factors_into`; ``fluid_velocity`` (cap, 3), or
+    (1, 3) for one velocity everywhere [m/s]; ``body_acceleration`` (3,) [m/s^2]; ``h`` [s]; ``impulse`` (cap, 3)
+    [N s]: the drag impulse accumulator (an array with no rows: not tracked).
+    """
+
+    drag: np.ndarray
+    fluid_velocity: np.ndarray
+    body_acceleration: np.ndarray
+    h: float
+    impulse: np.ndarray
+
+
+#: The ``approach`` array of a :class:`Contacts` that records nothing.
+NO_RECORD = np.zeros(0)
+
+
+def contacts_record(neighbours, damping, stiffness_ref, diameter_ref, law, approach=NO_RECORD, h=0.0) -> Contacts:
+    """A :class:`Contacts` for a :class:`fulldem.neighbours.NeighbourList`'s current rows."""
+    period = neighbours.period
+    return Contacts(neighbours.start, neighbours.index, damping, period, neighbours.inverse_period,
+                    bool((np.asarray(period) > 0.0).any()), float(stiffness_ref), float(diameter_ref), int(law),
+                    approach, float(h))
+
+
+def walls_record(box_lower, box_upper, periodic, absorbing_bottom, outlet, stiffness_ref, diameter_ref, zeta,
+                 law) -> Walls:
+    """A :class:`Walls` for a box [m] with ``periodic`` (3,) bool axes, an optionally absorbing bottom and ``outlet``
+    (side, height, transverse, radius) or None."""
+    lower, upper = wall_planes(box_lower, box_upper, periodic, absorbing_bottom)
+    side, height, transverse, radius = outlet if outlet is not None else (-1, 0.0, 0.0, 0.0)
+    return Walls(not bool(np.all(periodic)), lower, upper, int(side), float(height), float(transverse),
+                 float(radius), float(stiffness_ref), float(diameter_ref), float(zeta), int(law))
+
+
+def wall_planes(box_lower, box_upper, periodic, absorbing_bottom):
+    """Plane positions (wall_lower, wall_upper) (3,) [m] for the kernels: +-inf on periodic axes and, with an
+    absorbing bottom, for the z- plane."""
+    periodic = np.asarray(periodic, dtype=bool)
+    lower = np.where(periodic, -np.inf, np.asarray(box_lower, dtype=float))
+    upper = np.where(periodic, np.inf, np.asarray(box_upper, dtype=float))
+    if absorbing_bottom:
+        lower[2] = -np.inf
+    return lower, upper
+
+
+def _chunks(count):
+    """Number of work chunks for a parallel loop: a few per thread (load balance), at least one."""
+    return max(1, min(count, 8 * numba.get_num_threads()))
 
 
 # ---------------------------------------------------------------------------------------------------- pointwise laws
@@ -94,28 +225,27 @@ def _mutual_partner(p, flags, partner):
 
 
 @njit(cache=True, inline="always")
-def _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period):
-    """x_j - x_i (minimum image on periodic axes) and its squared length [m], [m^2].
+def _separation(position, j, xi, yi, zi, c):
+    """x_j - x_i (minimum image on periodic axes of :class:`Contacts` c) and its squared length [m], [m^2].
 
-    ``periodic_any`` is loop-invariant: a box without periodic axes skips the image arithmetic (10-20 % of a
+    ``c.periodic_any`` is loop-invariant: a box without periodic axes skips the image arithmetic (10-20 % of a
     contact kernel) at the cost of one well-predicted branch.
     """
     dx = position[j, 0] - xi
     dy = position[j, 1] - yi
     dz = position[j, 2] - zi
-    if periodic_any:
-        dx -= period[0] * np.rint(dx * inverse_period[0])
-        dy -= period[1] * np.rint(dy * inverse_period[1])
-        dz -= period[2] * np.rint(dz * inverse_period[2])
+    if c.periodic_any:
+        dx -= c.period[0] * np.rint(dx * c.inverse_period[0])
+        dy -= c.period[1] * np.rint(dy * c.inverse_period[1])
+        dz -= c.period[2] * np.rint(dz * c.inverse_period[2])
     return dx, dy, dz, dx * dx + dy * dy + dz * dz
 
 
 @njit(cache=True, inline="always")
-def _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi, di, stiffness_ref, diameter_ref, damping,
-                law, periodic_any, period, inverse_period):
+def _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi, di, damping, c):
     """Force of a touching droplet j on droplet i with dashpot ``damping`` [N s/m]: (fx, fy, fz, overlap, smaller
-    diameter) [N], [m]."""
-    dx, dy, dz, r2 = _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period)
+    diameter, normal relative velocity vn) [N], [m], [m/s] (vn < 0: approaching)."""
+    dx, dy, dz, r2 = _separation(position, j, xi, yi, zi, c)
     dj = diameter[j]
     dist = math.sqrt(r2)
     inv = 1.0 / dist
@@ -123,9 +253,9 @@ def _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi, di, sti
     vn = (velocity[j, 0] - ui) * nx + (velocity[j, 1] - vi) * ny + (velocity[j, 2] - wi) * nz
     small = min(di, dj)
     overlap = 0.5 * (di + dj) - dist
-    k = contacts.pair_stiffness(stiffness_ref, diameter_ref, small)
-    f = contacts.normal_force(law, overlap, vn, k, damping)
-    return -f * nx, -f * ny, -f * nz, overlap, small
+    k = contacts.pair_stiffness(c.stiffness_ref, c.diameter_ref, small)
+    f = contacts.normal_force(c.law, overlap, vn, k, damping)
+    return -f * nx, -f * ny, -f * nz, overlap, small, vn
 
 
 @njit(cache=True, inline="always")
@@ -137,7 +267,7 @@ def _damping_of_pair(diameter, mass, i, j, stiffness_ref, diameter_ref, zeta):
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
 def pair_damping(start, index, diameter, mass, count, stiffness_ref, diameter_ref, zeta, damping):
-    """damping[k] = dashpot coefficient [N s/m] of list entry k (pair i, index[k]), for :func:`contact_forces_full`.
+    """damping[k] = dashpot coefficient [N s/m] of list entry k (pair i, index[k]), for :class:`Contacts`.
 
     Computed after each list build and whenever sizes or masses change: it takes a square root and a division out
     of every contact evaluation (a fifth of the dense case's force loop).
@@ -148,47 +278,43 @@ def pair_damping(start, index, diameter, mass, count, stiffness_ref, diameter_re
 
 
 @njit(cache=True, inline="always")
-def _in_outlet(p, position, side, outlet_side, outlet_height, outlet_transverse, outlet_radius):
-    """True if droplet p's centre faces the outlet hole in wall ``side`` (that wall then exerts no force)."""
-    if side != outlet_side:
+def _in_outlet(p, position, side, w):
+    """True if droplet p's centre faces the outlet hole of :class:`Walls` w in wall ``side`` (no force there)."""
+    if side != w.outlet_side:
         return False
     transverse = position[p, 1] if side < Y_LOW else position[p, 0]
-    dz = position[p, 2] - outlet_height
-    dt = transverse - outlet_transverse
-    return dz * dz + dt * dt < outlet_radius * outlet_radius
+    dz = position[p, 2] - w.outlet_height
+    dt = transverse - w.outlet_transverse
+    return dz * dz + dt * dt < w.outlet_radius * w.outlet_radius
 
 
 @njit(cache=True, inline="always")
-def _wall_force(p, position, velocity, diameter, mass, wall_lower, wall_upper, outlet_side, outlet_height,
-                outlet_transverse, outlet_radius, stiffness_ref, diameter_ref, zeta, law):
-    """Force of the box's planes on droplet p: (fx, fy, fz, largest overlap ratio) [N], [-].
+def _wall_force(p, position, velocity, diameter, mass, w):
+    """Force of the box's planes (:class:`Walls` w) on droplet p: (fx, fy, fz, largest overlap ratio) [N], [-].
 
-    wall_lower/wall_upper (3,) [m]: the planes' positions, -inf/+inf where there is none (periodic axis, absorbing
-    bottom), so the common case -- touching no wall -- costs six comparisons.
+    Planes at -inf/+inf where there is none, so the common case -- touching no wall -- costs six comparisons.
     """
     radius = 0.5 * diameter[p]
     x, y, z = position[p, 0], position[p, 1], position[p, 2]
-    if (x - wall_lower[0] >= radius) & (wall_upper[0] - x >= radius) & (y - wall_lower[1] >= radius) \
-            & (wall_upper[1] - y >= radius) & (z - wall_lower[2] >= radius) & (wall_upper[2] - z >= radius):
+    if (x - w.lower[0] >= radius) & (w.upper[0] - x >= radius) & (y - w.lower[1] >= radius) \
+            & (w.upper[1] - y >= radius) & (z - w.lower[2] >= radius) & (w.upper[2] - z >= radius):
         return 0.0, 0.0, 0.0, 0.0
-    k = contacts.pair_stiffness(stiffness_ref, diameter_ref, diameter[p])
-    gamma = contacts.damping_coefficient(k, mass[p], zeta)
+    k = contacts.pair_stiffness(w.stiffness_ref, w.diameter_ref, diameter[p])
+    gamma = contacts.damping_coefficient(k, mass[p], w.zeta)
     worst = 0.0
     f0 = 0.0
     f1 = 0.0
     f2 = 0.0
     for a in range(3):
-        low = radius - (position[p, a] - wall_lower[a])
-        high = radius - (wall_upper[a] - position[p, a])
+        low = radius - (position[p, a] - w.lower[a])
+        high = radius - (w.upper[a] - position[p, a])
         f = 0.0
         # lower plane: the droplet separates from it moving along +a
-        if low > 0.0 and not _in_outlet(p, position, 2 * a, outlet_side, outlet_height, outlet_transverse,
-                                        outlet_radius):
-            f += contacts.normal_force(law, low, velocity[p, a], k, gamma)
+        if low > 0.0 and not _in_outlet(p, position, 2 * a, w):
+            f += contacts.normal_force(w.law, low, velocity[p, a], k, gamma)
             worst = max(worst, low / diameter[p])
-        if high > 0.0 and not _in_outlet(p, position, 2 * a + 1, outlet_side, outlet_height, outlet_transverse,
-                                         outlet_radius):
-            f -= contacts.normal_force(law, high, -velocity[p, a], k, gamma)
+        if high > 0.0 and not _in_outlet(p, position, 2 * a + 1, w):
+            f -= contacts.normal_force(w.law, high, -velocity[p, a], k, gamma)
             worst = max(worst, high / diameter[p])
         if a == 0:
             f0 = f
@@ -199,35 +325,18 @@ def _wall_force(p, position, velocity, diameter, mass, wall_lower, wall_upper, o
     return f0, f1, f2, worst
 
 
-def wall_planes(box_lower, box_upper, periodic, absorbing_bottom):
-    """Plane positions (wall_lower, wall_upper) (3,) [m] for the kernels: +-inf on periodic axes and, with an
-    absorbing bottom, for the z- plane."""
-    periodic = np.asarray(periodic, dtype=bool)
-    lower = np.where(periodic, -np.inf, np.asarray(box_lower, dtype=float))
-    upper = np.where(periodic, np.inf, np.asarray(box_upper, dtype=float))
-    if absorbing_bottom:
-        lower[2] = -np.inf
-    return lower, upper
-
-
-def _chunks(count):
-    """Number of work chunks for a parallel loop: a few per thread (load balance), at least one."""
-    return max(1, min(count, 8 * numba.get_num_threads()))
-
-
-# ---------------------------------------------------------------------------------------------------- contact forces
+# ---------------------------------------------------------------------------------------------------- contact rows
 @njit(cache=True, inline="always")
-def _touching_entries(i, position, diameter, flags, partner, start, index, periodic_any, period, inverse_period,
-                      touching):
+def _touching_entries(i, position, diameter, flags, partner, c, touching):
     """Write into ``touching`` the list entries k of row i whose partner overlaps droplet i (not its mutual
     coalescence partner), without a branch per entry; returns how many."""
     xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
     di = diameter[i]
     skip = _mutual_partner(i, flags, partner)
     found = 0
-    for k in range(start[i], start[i + 1]):
-        j = index[k]
-        r2 = _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period)[3]
+    for k in range(c.start[i], c.start[i + 1]):
+        j = c.index[k]
+        r2 = _separation(position, j, xi, yi, zi, c)[3]
         reach = 0.5 * (di + diameter[j])
         touching[found] = k
         found += (r2 < reach * reach) & (r2 > 0.0) & (j != skip)
@@ -235,18 +344,21 @@ def _touching_entries(i, position, diameter, flags, partner, start, index, perio
 
 
 @njit(cache=True, inline="always")
-def _row_force(i, position, velocity, diameter, mass, flags, partner, start, index, stiffness_ref, diameter_ref,
-               damping, law, periodic_any, period, inverse_period, walls, wall_lower, wall_upper, outlet_side,
-               outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching):
-    """Force on droplet i from its row of a full list (and the walls): (fx, fy, fz, largest overlap ratio).
+def _row(i, position, velocity, b, c, w, approach, touching, force, half):
+    """The one contact-row body: force on droplet i from row i of the list and from the walls (if ``w.on``):
+    (fx, fy, fz, largest overlap ratio) [N], [-].
 
     The row is first filtered into the entries of touching partners (``touching``: a work row, filled without a
-    branch per entry), then only their forces are computed, with the entries' dashpot coefficients ``damping``.
+    branch per entry), then only their forces are computed, with the entries' dashpot coefficients. With ``half``
+    (a half list: each pair in one row only) each pair force is also subtracted from ``force[j]`` of the partner;
+    with a full list ``force`` is not touched (the caller stores or uses the returned force). First contacts are
+    written to ``approach`` (the kernel's alias of ``c.approach``, see :class:`Contacts`) when it has entries.
     """
     xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
+    diameter, flags = b.diameter, b.flags
     di = diameter[i]
-    found = _touching_entries(i, position, diameter, flags, partner, start, index, periodic_any, period,
-                              inverse_period, touching)
+    found = _touching_entries(i, position, diameter, flags, b.partner, c, touching)
+    record = approach.shape[0] > 0
     fx = 0.0
     fy = 0.0
     fz = 0.0
@@ -255,18 +367,22 @@ def _row_force(i, position, velocity, diameter, mass, flags, partner, start, ind
         ui, vi, wi = velocity[i, 0], velocity[i, 1], velocity[i, 2]
         for q in range(found):
             k = touching[q]
-            gx, gy, gz, overlap, small = _pair_force(position, velocity, diameter, index[k], xi, yi, zi, ui, vi, wi,
-                                                     di, stiffness_ref, diameter_ref, damping[k], law, periodic_any,
-                                                     period, inverse_period)
+            j = c.index[k]
+            gx, gy, gz, overlap, small, vn = _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi,
+                                                         di, c.damping[k], c)
             fx += gx
             fy += gy
             fz += gz
+            if half:
+                force[j, 0] -= gx
+                force[j, 1] -= gy
+                force[j, 2] -= gz
             if overlap > worst * small:  # the largest ratio without a division per contact
                 worst = overlap / small
-    if walls:
-        gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, mass, wall_lower, wall_upper, outlet_side,
-                                        outlet_height, outlet_transverse, outlet_radius, stiffness_ref, diameter_ref,
-                                        wall_zeta, law)
+            if record and overlap < -vn * c.h and ((flags[i] | flags[j]) & COALESCING) == 0:
+                approach[k] = -vn
+    if w.on:
+        gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, b.mass, w)
         fx += gx
         fy += gy
         fz += gz
@@ -275,72 +391,35 @@ def _row_force(i, position, velocity, diameter, mass, flags, partner, start, ind
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def contact_forces_full(position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref,
-                        diameter_ref, damping, law, period, inverse_period, walls, wall_lower, wall_upper, outlet_side,
-                        outlet_height, outlet_transverse, outlet_radius, wall_zeta, nchunk, candidates, force):
-    """Pair forces from a *full* neighbour list, plus the walls' if ``walls``: force (overwritten) [N].
+def contact_forces_full(position, velocity, b, count, c, w, nchunk, candidates, force):
+    """Pair forces from a *full* neighbour list, plus the walls': force (overwritten) [N].
 
-    Each droplet sums its own row, so threads never write the same entry. ``damping`` (entries,) [N s/m] from
-    :func:`pair_damping`; ``candidates`` (nchunk, longest row) int32: work rows. Walls: planes from
-    :func:`wall_planes`, outlet and law as in :func:`wall_forces`, damping ratio ``wall_zeta``. Returns the largest
-    overlap ratio (overlap / smaller diameter) [-]. Mutual coalescence partners exert no force on each other.
+    Each droplet sums its own row, so threads never write the same entry. ``b`` :class:`Bodies`, ``c``
+    :class:`Contacts`, ``w`` :class:`Walls`; ``candidates`` (nchunk, longest row) int32: work rows. Returns the
+    largest overlap ratio (overlap / smaller diameter) [-]. Mutual coalescence partners exert no force on each other.
     """
-    periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
+    approach = c.approach  # written: an alias taken before the parallel loop (see the module docstring)
     worst = np.zeros(nchunk)
-    for c in prange(nchunk):
+    for ch in prange(nchunk):
         local = 0.0
-        for i in range(c * count // nchunk, (c + 1) * count // nchunk):
-            fx, fy, fz, ratio = _row_force(i, position, velocity, diameter, mass, flags, partner, start, index,
-                                           stiffness_ref, diameter_ref, damping, law, periodic_any, period,
-                                           inverse_period, walls, wall_lower, wall_upper, outlet_side, outlet_height,
-                                           outlet_transverse, outlet_radius, wall_zeta, candidates[c])
+        for i in range(ch * count // nchunk, (ch + 1) * count // nchunk):
+            fx, fy, fz, ratio = _row(i, position, velocity, b, c, w, approach, candidates[ch], force, False)
             force[i, 0] = fx
             force[i, 1] = fy
             force[i, 2] = fz
             local = max(local, ratio)
-        worst[c] = local
+        worst[ch] = local
     return worst.max()
 
 
 @njit(cache=True, inline="always")
-def _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref,
-               diameter_ref, damping, law, periodic_any, period, inverse_period, walls, wall_lower, wall_upper,
-               outlet_side, outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching, force):
+def _slab_rows(s, nslab, position, velocity, b, count, c, w, approach, touching, force):
     """Add the forces of the half-list rows of slab s (each pair to both droplets, and the walls') to ``force``;
     returns the largest overlap ratio."""
     local = 0.0
     for i in range(s * count // nslab, (s + 1) * count // nslab):
-        xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
-        di = diameter[i]
-        found = _touching_entries(i, position, diameter, flags, partner, start, index, periodic_any, period,
-                                  inverse_period, touching)
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
-        if found:
-            ui, vi, wi = velocity[i, 0], velocity[i, 1], velocity[i, 2]
-            for t in range(found):
-                k = touching[t]
-                j = index[k]
-                gx, gy, gz, overlap, small = _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi, di,
-                                                         stiffness_ref, diameter_ref, damping[k], law, periodic_any,
-                                                         period, inverse_period)
-                fx += gx
-                fy += gy
-                fz += gz
-                force[j, 0] -= gx
-                force[j, 1] -= gy
-                force[j, 2] -= gz
-                if overlap > local * small:
-                    local = overlap / small
-        if walls:
-            gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, mass, wall_lower, wall_upper,
-                                            outlet_side, outlet_height, outlet_transverse, outlet_radius,
-                                            stiffness_ref, diameter_ref, wall_zeta, law)
-            fx += gx
-            fy += gy
-            fz += gz
-            local = max(local, ratio)
+        fx, fy, fz, ratio = _row(i, position, velocity, b, c, w, approach, touching, force, True)
+        local = max(local, ratio)
         force[i, 0] += fx
         force[i, 1] += fy
         force[i, 2] += fz
@@ -363,10 +442,8 @@ def slab_count(count, longest_jump):
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def contact_forces_half(position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref,
-                        diameter_ref, damping, law, period, inverse_period, walls, wall_lower, wall_upper, outlet_side,
-                        outlet_height, outlet_transverse, outlet_radius, wall_zeta, nslab, candidates, force):
-    """Pair forces from a *half* neighbour list (each pair once), plus the walls' if ``walls``: force (overwritten).
+def contact_forces_half(position, velocity, b, count, c, w, nslab, candidates, force):
+    """Pair forces from a *half* neighbour list (each pair once), plus the walls': force (overwritten) [N].
 
     Each pair's force is computed once and added to both droplets. The droplets are cut into ``nslab`` slabs of
     consecutive indices (:func:`slab_count`); the even slabs run in parallel, then the odd ones. A slab writes only
@@ -375,58 +452,40 @@ def contact_forces_half(position, velocity, diameter, mass, flags, partner, coun
     not depend on the thread count or timing. ``candidates`` (nslab, longest row) int32: work rows; other arguments
     as :func:`contact_forces_full`. Returns the largest overlap ratio [-].
     """
-    periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
     for s in prange(nslab):
         for i in range(s * count // nslab, (s + 1) * count // nslab):
             force[i, 0] = 0.0
             force[i, 1] = 0.0
             force[i, 2] = 0.0
+    approach = c.approach
     worst = np.zeros(nslab)
     for phase in range(2):
         for q in prange((nslab - phase + 1) // 2):
             s = 2 * q + phase
-            worst[s] = _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index,
-                                  stiffness_ref, diameter_ref, damping, law, periodic_any, period, inverse_period,
-                                  walls, wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse,
-                                  outlet_radius, wall_zeta, candidates[s], force)
+            worst[s] = _slab_rows(s, nslab, position, velocity, b, count, c, w, approach, candidates[s], force)
     return worst.max()
-
-
 
 
 # ---------------------------------------------------------------------------------------------------- walls
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def wall_forces(position, velocity, diameter, mass, count, box_lower, box_upper, periodic, absorbing_bottom,
-                outlet_side, outlet_height, outlet_transverse, outlet_radius, stiffness_ref, diameter_ref, zeta, law,
-                nchunk, force):
-    """Add the contact force of the box's planes on bounded axes to ``force`` [N]; returns the largest ratio [-].
+def wall_forces(position, velocity, diameter, mass, count, w, nchunk, force):
+    """Add the contact force of the box's planes (:class:`Walls` w) to ``force`` [N]; returns the largest ratio [-].
 
-    The wall law is the pair law with m_eff = m and the stiffness of the droplet's own diameter. With
-    ``absorbing_bottom`` the z- plane exerts nothing (the caller removes droplets there). An outlet hole of radius
-    ``outlet_radius`` [m] in side wall ``outlet_side`` (0..3: x-, x+, y-, y+; -1: none) centred at height
-    ``outlet_height`` [m] and transverse coordinate ``outlet_transverse`` [m] (y on x walls, x on y walls) lets
-    droplets whose centre faces it pass. (The full-list contact kernel applies the same walls in its own loop.)
+    The wall law is the pair law with m_eff = m and the stiffness of the droplet's own diameter. An absorbing
+    bottom exerts nothing (the caller removes droplets there); droplets whose centre faces the outlet hole pass.
+    (The contact kernels apply the same walls in their own loop.)
     """
-    wall_lower = np.empty(3)
-    wall_upper = np.empty(3)
-    for a in range(3):
-        wall_lower[a] = -np.inf if periodic[a] or (a == 2 and absorbing_bottom) else box_lower[a]
-        wall_upper[a] = np.inf if periodic[a] else box_upper[a]
     worst = np.zeros(nchunk)
-    for c in prange(nchunk):
+    for ch in prange(nchunk):
         local = 0.0
-        for p in range(c * count // nchunk, (c + 1) * count // nchunk):
-            fx, fy, fz, ratio = _wall_force(p, position, velocity, diameter, mass, wall_lower, wall_upper,
-                                            outlet_side, outlet_height, outlet_transverse, outlet_radius,
-                                            stiffness_ref, diameter_ref, zeta, law)
+        for p in range(ch * count // nchunk, (ch + 1) * count // nchunk):
+            fx, fy, fz, ratio = _wall_force(p, position, velocity, diameter, mass, w)
             force[p, 0] += fx
             force[p, 1] += fy
             force[p, 2] += fz
             local = max(local, ratio)
-        worst[c] = local
+        worst[ch] = local
     return worst.max()
-
-
 
 
 # ---------------------------------------------------------------------------------------------------- integrator
@@ -444,27 +503,25 @@ def drag_factors_into(mass, beta, h, count, drag):
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def integrate_initial(position, velocity, force, mass, drag, fluid_velocity, body_acceleration, h, count, nchunk,
-                      impulse):
+def integrate_initial(position, velocity, force, mass, m, count, nchunk):
     """First half of the exponential velocity-Verlet step: positions to t + h, velocities partly (in place).
 
-    force (cap, 3) [N] at the current positions (contact + wall + other, no drag); drag (cap, 3) the factors of
-    :func:`drag_factors_into`; fluid_velocity (cap, 3), or (1, 3) for one velocity everywhere [m/s];
-    body_acceleration (3,) [m/s^2]; h [s]. Adds the first part of the drag impulse to ``impulse`` (cap, 3) [N s]
-    (-m v - h (F + m a_body)/2, see the module docstring; an array with no rows: not tracked). Returns the largest
-    displacement of a droplet in this step [m] (the neighbour list's cheap validity bound). Next: forces at the new
-    positions, then :func:`integrate_final` with the same drag factors and fluid velocity.
+    force (cap, 3) [N] at the current positions (contact + wall + other, no drag); mass (cap,) [kg]; ``m``
+    :class:`Motion`. Adds the first part of the drag impulse to ``m.impulse`` (-m v - h (F + m a_body)/2, see the
+    module docstring). Returns the largest displacement of a droplet in this step [m] (the neighbour list's cheap
+    validity bound). Next: forces at the new positions, then :func:`integrate_final` with the same ``m``.
     """
+    fluid_velocity, body_acceleration, h, impulse = m.fluid_velocity, m.body_acceleration, m.h, m.impulse
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     half_h = 0.5 * h
     worst = np.zeros(nchunk)
-    for c in prange(nchunk):
+    for ch in prange(nchunk):
         local = 0.0
-        for p in range(c * count // nchunk, (c + 1) * count // nchunk):
-            m = mass[p]
-            inv_m = 1.0 / m
-            e, phi1, phi2 = drag[p, 0], drag[p, 1], drag[p, 2]
+        for p in range(ch * count // nchunk, (ch + 1) * count // nchunk):
+            mp = mass[p]
+            inv_m = 1.0 / mp
+            e, phi1, phi2 = m.drag[p, 0], m.drag[p, 1], m.drag[p, 2]
             kick = phi1 - phi2 / h
             moved = 0.0
             for a in range(3):
@@ -477,40 +534,47 @@ def integrate_initial(position, velocity, force, mass, drag, fluid_velocity, bod
                 moved += step * step
                 v_new = u + w * e + acc * kick
                 if track:  # the momentum part telescopes: -m v here, +m v at the advance's end
-                    impulse[p, a] -= m * v + m * acc * half_h
+                    impulse[p, a] -= mp * v + mp * acc * half_h
                 velocity[p, a] = v_new
             local = max(local, moved)
-        worst[c] = local
+        worst[ch] = local
     return math.sqrt(worst.max())
 
 
+@njit(cache=True, inline="always")
+def _kick(p, velocity, force, mass, m, impulse, track, half_h):
+    """Second half of droplet p's step: add the end-of-step force's share to its velocity; complete its impulse."""
+    mp = mass[p]
+    inv_m = 1.0 / mp
+    kick_end = m.drag[p, 2] / m.h
+    for a in range(3):
+        acc = force[p, a] * inv_m + m.body_acceleration[a]
+        velocity[p, a] += acc * kick_end
+        if track:
+            impulse[p, a] += mp * velocity[p, a] - mp * acc * half_h
+
+
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def integrate_final(velocity, force, mass, drag, body_acceleration, h, count, impulse):
+def integrate_final(velocity, force, mass, m, count):
     """Second half of the step: add the end-of-step force's share to the velocities; complete the drag impulse.
 
     force (cap, 3) [N] at the new positions (and the partly updated velocities, as in velocity Verlet).
     """
+    impulse = m.impulse
     track = impulse.shape[0] > 0
-    half_h = 0.5 * h
+    half_h = 0.5 * m.h
     for p in prange(count):
-        m = mass[p]
-        inv_m = 1.0 / m
-        kick = drag[p, 2] / h
-        for a in range(3):
-            acc = force[p, a] * inv_m + body_acceleration[a]
-            velocity[p, a] += acc * kick
-            if track:
-                impulse[p, a] += m * velocity[p, a] - m * acc * half_h
+        _kick(p, velocity, force, mass, m, impulse, track, half_h)
 
 
 @njit(cache=True, inline="always")
-def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride, body_acceleration, h, track,
-                impulse, position_out, velocity_out):
+def _kick_drift(p, position, velocity, fx, fy, fz, mass, m, impulse, stride, track, position_out, velocity_out):
     """Finish droplet p's step with force (fx, fy, fz) and start the next one, writing the new state to the ``_out``
     arrays (which may be the inputs). Returns the squared displacement [m^2]."""
-    m = mass[p]
-    inv_m = 1.0 / m
-    e, phi1, phi2 = drag[p, 0], drag[p, 1], drag[p, 2]
+    h, body_acceleration = m.h, m.body_acceleration
+    mp = mass[p]
+    inv_m = 1.0 / mp
+    e, phi1, phi2 = m.drag[p, 0], m.drag[p, 1], m.drag[p, 2]
     kick_end = phi2 / h
     kick_start = phi1 - kick_end
     moved = 0.0
@@ -518,7 +582,7 @@ def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, s
         f = fx if a == 0 else (fy if a == 1 else fz)
         acc = f * inv_m + body_acceleration[a]
         v = velocity[p, a] + acc * kick_end
-        u = fluid_velocity[p * stride, a]
+        u = m.fluid_velocity[p * stride, a]
         w = v - u
         step = u * h + w * phi1 + acc * phi2
         position_out[p, a] = position[p, a] + step
@@ -529,38 +593,35 @@ def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, s
     # impulse row is then neither read nor written
     if track and ((fx != 0.0) | (fy != 0.0) | (fz != 0.0) | (body_acceleration[0] != 0.0)
                   | (body_acceleration[1] != 0.0) | (body_acceleration[2] != 0.0)):
-        impulse[p, 0] -= h * (fx + m * body_acceleration[0])
-        impulse[p, 1] -= h * (fy + m * body_acceleration[1])
-        impulse[p, 2] -= h * (fz + m * body_acceleration[2])
+        impulse[p, 0] -= h * (fx + mp * body_acceleration[0])
+        impulse[p, 1] -= h * (fy + mp * body_acceleration[1])
+        impulse[p, 2] -= h * (fz + mp * body_acceleration[2])
     return moved
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def integrate_kick_drift(position, velocity, force, mass, drag, fluid_velocity, body_acceleration, h, count, nchunk,
-                         impulse):
+def integrate_kick_drift(position, velocity, force, mass, m, count, nchunk):
     """:func:`integrate_final` of one step then :func:`integrate_initial` of the next, in one pass over the droplets.
 
     Both use the same force (computed at the positions between the two steps), so this is exactly the two calls in
     a row, with one memory pass and one parallel launch instead of two. Returns the step's largest displacement [m].
     """
-    stride = 1 if fluid_velocity.shape[0] > 1 else 0
+    stride = 1 if m.fluid_velocity.shape[0] > 1 else 0
+    impulse = m.impulse
     track = impulse.shape[0] > 0
     worst = np.zeros(nchunk)
-    for c in prange(nchunk):
+    for ch in prange(nchunk):
         local = 0.0
-        for p in range(c * count // nchunk, (c + 1) * count // nchunk):
-            moved = _kick_drift(p, position, velocity, force[p, 0], force[p, 1], force[p, 2], mass, drag,
-                                fluid_velocity, stride, body_acceleration, h, track, impulse, position, velocity)
+        for p in range(ch * count // nchunk, (ch + 1) * count // nchunk):
+            moved = _kick_drift(p, position, velocity, force[p, 0], force[p, 1], force[p, 2], mass, m, impulse,
+                                stride, track, position, velocity)
             local = max(local, moved)
-        worst[c] = local
+        worst[ch] = local
     return math.sqrt(worst.max())
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def step_fused(position, velocity, position_next, velocity_next, diameter, mass, flags, partner, count, start, index,
-               stiffness_ref, diameter_ref, damping, law, period, inverse_period, walls, wall_lower, wall_upper,
-               outlet_side, outlet_height, outlet_transverse, outlet_radius, wall_zeta, drag, fluid_velocity,
-               body_acceleration, h, nchunk, candidates, impulse):
+def step_fused(position, velocity, position_next, velocity_next, b, count, c, w, m, nchunk, candidates):
     """One whole step in one pass: forces at (position, velocity) as :func:`contact_forces_full`, then
     :func:`integrate_kick_drift`, the new state written to the *other* arrays (position_next, velocity_next).
 
@@ -568,60 +629,47 @@ def step_fused(position, velocity, position_next, velocity_next, diameter, mass,
     neighbours' force computation, so the force array and a second pass over the droplets are not needed. Returns
     (largest overlap ratio [-], largest displacement [m]).
     """
-    periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
-    stride = 1 if fluid_velocity.shape[0] > 1 else 0
+    stride = 1 if m.fluid_velocity.shape[0] > 1 else 0
+    impulse, approach = m.impulse, c.approach
     track = impulse.shape[0] > 0
     worst = np.zeros(nchunk)
     travel = np.zeros(nchunk)
-    for c in prange(nchunk):
+    no_force = np.zeros((0, 3))
+    for ch in prange(nchunk):
         local = 0.0
         moved = 0.0
-        for i in range(c * count // nchunk, (c + 1) * count // nchunk):
-            fx, fy, fz, ratio = _row_force(i, position, velocity, diameter, mass, flags, partner, start, index,
-                                           stiffness_ref, diameter_ref, damping, law, periodic_any, period,
-                                           inverse_period, walls, wall_lower, wall_upper, outlet_side, outlet_height,
-                                           outlet_transverse, outlet_radius, wall_zeta, candidates[c])
+        for i in range(ch * count // nchunk, (ch + 1) * count // nchunk):
+            fx, fy, fz, ratio = _row(i, position, velocity, b, c, w, approach, candidates[ch], no_force, False)
             local = max(local, ratio)
-            moved = max(moved, _kick_drift(i, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride,
-                                           body_acceleration, h, track, impulse, position_next, velocity_next))
-        worst[c] = local
-        travel[c] = moved
+            moved = max(moved, _kick_drift(i, position, velocity, fx, fy, fz, b.mass, m, impulse, stride, track,
+                                           position_next, velocity_next))
+        worst[ch] = local
+        travel[ch] = moved
     return worst.max(), math.sqrt(travel.max())
 
 
 @njit(cache=True, inline="always")
-def _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride, body_acceleration, h,
-               track, impulse, drift):
+def _slab_kick(s, nslab, count, position, velocity, force, mass, m, impulse, stride, track, drift):
     """Finish the step of slab s's droplets with their force; with ``drift`` also start the next step and zero the
     force for the next accumulation. Returns the largest squared displacement [m^2]."""
     moved = 0.0
-    half_h = 0.5 * h
+    half_h = 0.5 * m.h
     for p in range(s * count // nslab, (s + 1) * count // nslab):
         if drift:
             fx, fy, fz = force[p, 0], force[p, 1], force[p, 2]
-            moved = max(moved, _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride,
-                                           body_acceleration, h, track, impulse, position, velocity))
+            moved = max(moved, _kick_drift(p, position, velocity, fx, fy, fz, mass, m, impulse, stride, track,
+                                           position, velocity))
             if (fx != 0.0) | (fy != 0.0) | (fz != 0.0):  # most rows are zero already: no write, no dirty line
                 force[p, 0] = 0.0
                 force[p, 1] = 0.0
                 force[p, 2] = 0.0
         else:
-            m = mass[p]
-            inv_m = 1.0 / m
-            kick_end = drag[p, 2] / h
-            for a in range(3):
-                acc = force[p, a] * inv_m + body_acceleration[a]
-                velocity[p, a] += acc * kick_end
-                if track:
-                    impulse[p, a] += m * velocity[p, a] - m * acc * half_h
+            _kick(p, velocity, force, mass, m, impulse, track, half_h)
     return moved
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def step_half(position, velocity, diameter, mass, flags, partner, count, start, index, stiffness_ref, diameter_ref,
-              damping, law, period, inverse_period, walls, wall_lower, wall_upper, outlet_side, outlet_height,
-              outlet_transverse, outlet_radius, wall_zeta, drag, fluid_velocity, body_acceleration, h, nslab,
-              candidates, impulse, force, even_pending, last):
+def step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, even_pending, last):
     """One step of the half-list scheme in two parallel phases (three for the ``last`` step).
 
     Phase A, even slabs: (if ``even_pending``) finish their previous step and start this one
@@ -632,63 +680,49 @@ def step_half(position, velocity, diameter, mass, flags, partner, count, start, 
     parities only finish the step (no drift) and ``force`` keeps the forces at the final positions. Same
     partitioning rules as :func:`contact_forces_half`. Returns (largest overlap ratio [-], largest displacement [m]).
     """
-    periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
-    stride = 1 if fluid_velocity.shape[0] > 1 else 0
+    stride = 1 if m.fluid_velocity.shape[0] > 1 else 0
+    impulse, approach = m.impulse, c.approach
     track = impulse.shape[0] > 0
+    mass = b.mass
     worst = np.zeros(nslab)
     travel = np.zeros(nslab)
     for q in prange((nslab + 1) // 2):
         s = 2 * q
         if even_pending:
-            travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
-                                   body_acceleration, h, track, impulse, True)
-        worst[s] = _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index,
-                              stiffness_ref, diameter_ref, damping, law, periodic_any, period, inverse_period, walls,
-                              wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse, outlet_radius,
-                              wall_zeta, candidates[s], force)
+            travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, m, impulse, stride, track, True)
+        worst[s] = _slab_rows(s, nslab, position, velocity, b, count, c, w, approach, candidates[s], force)
     for q in prange(nslab // 2):
         s = 2 * q + 1
-        worst[s] = _slab_rows(s, nslab, position, velocity, diameter, mass, flags, partner, count, start, index,
-                              stiffness_ref, diameter_ref, damping, law, periodic_any, period, inverse_period, walls,
-                              wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse, outlet_radius,
-                              wall_zeta, candidates[s], force)
-        travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
-                               body_acceleration, h, track, impulse, not last)
+        worst[s] = _slab_rows(s, nslab, position, velocity, b, count, c, w, approach, candidates[s], force)
+        travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, m, impulse, stride, track,
+                               not last)
     if last:
         for q in prange((nslab + 1) // 2):
-            _slab_kick(2 * q, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
-                       body_acceleration, h, track, impulse, False)
+            _slab_kick(2 * q, nslab, count, position, velocity, force, mass, m, impulse, stride, track, False)
     return worst.max(), math.sqrt(travel.max())
 
 
 @njit(cache=True)
-def step_half_many(steps, travel_bound, half_skin, lower, position, velocity, diameter, mass, flags, partner, count,
-                   start, index, stiffness_ref, diameter_ref, damping, law, period, inverse_period, walls,
-                   wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse, outlet_radius, wall_zeta,
-                   drag, fluid_velocity, body_acceleration, h, nslab, candidates, impulse, force, even_pending):
+def step_half_many(steps, travel_bound, half_skin, lower, position, velocity, b, count, c, w, m, nslab, candidates,
+                   force, even_pending):
     """Up to ``steps`` consecutive :func:`step_half` calls in one compiled loop (no Python between steps: at ten
-    thousand droplets a step takes about 0.2 ms, and a Python call with 33 arguments a good part of that).
+    thousand droplets a step takes about 0.2 ms, and a Python call a good part of that).
 
     Before each step the periodic positions are wrapped; the loop stops before a step when ``travel_bound`` (the
     sum of the steps' largest displacements since the list was built) exceeds ``half_skin``, since the neighbour
     list must then be checked in Python. The last of ``steps`` ends complete (``last``). Returns (steps done,
     largest overlap ratio over them, last step's overlap ratio, travel bound, even slabs pending).
     """
-    periodic_any = period[0] > 0.0 or period[1] > 0.0 or period[2] > 0.0
     pending = even_pending
     peak = 0.0
     worst = 0.0
     for k in range(steps):
-        if periodic_any:
-            wrap_positions(position, count, lower, period)
+        if c.periodic_any:
+            wrap_positions(position, count, lower, c.period)
         if travel_bound > half_skin:
             return k, peak, worst, travel_bound, pending
         last = k + 1 == steps
-        worst, moved = step_half(position, velocity, diameter, mass, flags, partner, count, start, index,
-                                 stiffness_ref, diameter_ref, damping, law, period, inverse_period, walls, wall_lower,
-                                 wall_upper, outlet_side, outlet_height, outlet_transverse, outlet_radius, wall_zeta,
-                                 drag, fluid_velocity, body_acceleration, h, nslab, candidates, impulse, force,
-                                 pending, last)
+        worst, moved = step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, pending, last)
         peak = max(peak, worst)
         travel_bound += moved
         pending = not last
@@ -696,19 +730,36 @@ def step_half_many(steps, travel_bound, half_skin, lower, position, velocity, di
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def finish_even_slabs(position, velocity, force, mass, drag, fluid_velocity, body_acceleration, h, count, nslab,
-                      impulse):
+def finish_even_slabs(position, velocity, force, mass, m, count, nslab):
     """Kick-drift the pending even slabs of :func:`step_half` (all droplets then at the same time level, forces
     zero), e.g. before a neighbour-list rebuild. Returns the largest displacement [m]."""
-    stride = 1 if fluid_velocity.shape[0] > 1 else 0
+    stride = 1 if m.fluid_velocity.shape[0] > 1 else 0
+    impulse = m.impulse
     track = impulse.shape[0] > 0
     travel = np.zeros(nslab)
     for q in prange((nslab + 1) // 2):
-        travel[2 * q] = _slab_kick(2 * q, nslab, count, position, velocity, force, mass, drag, fluid_velocity,
-                                   stride, body_acceleration, h, track, impulse, True)
+        travel[2 * q] = _slab_kick(2 * q, nslab, count, position, velocity, force, mass, m, impulse, stride, track,
+                                   True)
     return math.sqrt(travel.max())
 
 
+@njit(cache=True)
+def first_contacts(start, index, approach, count, ident, out_a, out_b, out_speed, reset):
+    """The first contacts recorded in ``approach`` (see :class:`Contacts`), as droplet idents (a, b) and approach
+    speeds [m/s] written to the ``out_`` arrays (at least as long as the list); returns how many. With ``reset`` the
+    entries read are set back to -1."""
+    found = 0
+    for i in range(count):
+        for k in range(start[i], start[i + 1]):
+            speed = approach[k]
+            if speed >= 0.0:
+                out_a[found] = ident[i]
+                out_b[found] = ident[index[k]]
+                out_speed[found] = speed
+                found += 1
+                if reset:
+                    approach[k] = -1.0
+    return found
 
 
 # ---------------------------------------------------------------------------------------------------- diagnostics
@@ -772,7 +823,7 @@ class DemStepper:
 
     def __init__(self, store, lower, size, periodic, h, stiffness_ref, diameter_ref, restitution, skin,
                  body_acceleration, wall_restitution=None, law="hooke", absorbing_bottom=False, outlet=None,
-                 half_list=True, sort_on_rebuild=True, cell_diameter=None, threads=None):
+                 half_list=True, sort_on_rebuild=True, cell_diameter=None, threads=None, record_first_contacts=False):
         self.store = store
         self.lower = np.asarray(lower, dtype=float)
         self.size = np.asarray(size, dtype=float)
@@ -790,7 +841,11 @@ class DemStepper:
         if not -1 <= int(side) <= 3:
             raise ValueError(f"dem: outlet side {side} must be 0..3 (x-, x+, y-, y+) or -1 (none)")
         self.outlet = (int(side), float(height), float(transverse), float(radius))
-        self.planes = wall_planes(self.lower, self.upper, self.periodic, self.absorbing_bottom)
+        self.walls = walls_record(self.lower, self.upper, self.periodic, self.absorbing_bottom, self.outlet,
+                                  self.stiffness_ref, self.diameter_ref, self.wall_zeta, self.law)
+        self.record_first_contacts = bool(record_first_contacts)
+        self.approach = np.zeros(0)  # the list entries' first-contact record (Contacts.approach), when recording
+        self._first_contacts = []  # (ident a, ident b, approach speed) arrays read from the record since the last take
         self.sort_on_rebuild = bool(sort_on_rebuild)
         self.thread_choice = ThreadChoice(threads)
         self.neighbours = NeighbourList(self.lower, self.size, self.periodic, skin, half=half_list,
@@ -808,6 +863,7 @@ class DemStepper:
         self._travel_bound = 0.0
         self._drag_set = False
         self._seen_version = -1  # the store's version when the list and work arrays were last set up
+        self._seen_sizes = -1  # the store's size_version when masses and the list's damping were last set
 
     # -- set-up
     @property
@@ -828,12 +884,13 @@ class DemStepper:
             self.force = np.zeros((store.capacity, 3))
             self.drag = np.zeros((store.capacity, 3))
         if self.sort_on_rebuild and n:
-            store.reorder(self.neighbours.spatial_order(store.position, store.diameter, n))
+            store.reorder(self.neighbours.spatial_order(store.position, store.contact_diameter, n))
         droplet_masses(store.diameter, store.density, n, self.mass)
         self._build_list()
         self._drag_set = False
         self.compute_forces()
         self._seen_version = store.version
+        self._seen_sizes = store.size_version
 
     def list_state(self) -> dict:
         """The neighbour list and the travel bound since its build, for a checkpoint (see :meth:`restore_list`)."""
@@ -851,31 +908,80 @@ class DemStepper:
             self.drag = np.zeros((store.capacity, 3))
         droplet_masses(store.diameter, store.density, store.count, self.mass)
         self.neighbours.restore(state)
+        self._reset_record()
         self._travel_bound = float(state["travel_bound"][0])
         self._refresh_damping()
         self._drag_set = False
         self.compute_forces()
         self._seen_version = store.version
+        self._seen_sizes = store.size_version
+
+    @property
+    def sizes_stale(self) -> bool:
+        """Whether the store's sizes or densities changed in place since the masses were set (then call
+        :meth:`sizes_changed`)."""
+        return self._seen_sizes != self.store.size_version
 
     def sizes_changed(self) -> None:
-        """Diameters or densities changed in place: new masses, and an exact list check at the next step."""
-        droplet_masses(self.store.diameter, self.store.density, self.store.count, self.mass)
-        self._refresh_damping()
-        self._travel_bound = math.inf
+        """Diameters, contact diameters or densities changed in place: new masses and dashpots, and an exact list
+        check now (a grown droplet may reach beyond the list's skin); then call :meth:`set_drag`."""
+        s, nl = self.store, self.neighbours
+        droplet_masses(s.diameter, s.density, s.count, self.mass)
+        if nl.builds and nl.needs_rebuild(s.position, s.contact_diameter, s.count):
+            self._build_list()
+        else:
+            self._refresh_damping()
+            self._travel_bound = nl.last_travel if nl.builds else math.inf
         self._drag_set = False
+        self._seen_sizes = s.size_version
 
     def _build_list(self) -> None:
         s = self.store
-        self.neighbours.build(s.position, s.diameter, s.count)
+        self.neighbours.build(s.position, s.contact_diameter, s.count)
         self._travel_bound = 0.0
         self._refresh_damping()
+        self._reset_record()
+
+    # -- the first-contact record (coalescence)
+    def _reset_record(self) -> None:
+        """Size the first-contact record to the list and clear it (-1: no first contact). The record is read (by
+        ident) at the end of every :meth:`advance` and before the advance's own list rebuilds, while the store still
+        matches the list; what a lone :meth:`compute_forces` records before the store changes is dropped here."""
+        if not self.record_first_contacts:
+            return
+        entries = self.neighbours.index.shape[0]
+        if self.approach.shape[0] < entries:
+            self.approach = np.zeros(entries)
+        self.approach[:] = -1.0
+
+    def _read_first_contacts(self) -> None:
+        """Move the record's first contacts into :meth:`take_first_contacts`'s list (by ident, so they survive the
+        list rebuilds and re-sorts that change entries and indices) and clear it."""
+        nl = self.neighbours
+        if not self.record_first_contacts or nl.builds == 0 or self.approach.shape[0] == 0:
+            return
+        entries = int(nl.start[nl.count]) if nl.count else 0
+        a, b = np.empty(entries, dtype=np.int64), np.empty(entries, dtype=np.int64)
+        speed = np.empty(entries)
+        found = first_contacts(nl.start, nl.index, self.approach, nl.count, self.store.ident, a, b, speed, True)
+        if found:
+            self._first_contacts.append((a[:found], b[:found], speed[:found]))
+
+    def take_first_contacts(self):
+        """The first contacts (touching pairs, neither marked for coalescence, that did not touch a step earlier)
+        since the last call: idents (a, b) int64 and approach speeds [m/s], in the order they were read (a pair may
+        appear more than once). Only with ``record_first_contacts``."""
+        found, self._first_contacts = self._first_contacts, []
+        if not found:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
+        return tuple(np.concatenate(parts) for parts in zip(*found))
 
     def _refresh_damping(self) -> None:
         """Per-entry dashpot coefficients of the list, from the current sizes and masses."""
         nl, s = self.neighbours, self.store
         if self.damping.shape[0] < nl.index.shape[0]:
             self.damping = np.zeros(nl.index.shape[0])
-        pair_damping(nl.start, nl.index, s.diameter, self.mass, nl.count, self.stiffness_ref, self.diameter_ref,
+        pair_damping(nl.start, nl.index, s.contact_diameter, self.mass, nl.count, self.stiffness_ref, self.diameter_ref,
                      self.zeta, self.damping)
 
     def set_drag(self, beta) -> None:
@@ -887,20 +993,15 @@ class DemStepper:
         """Contact + wall forces at the current state into ``self.force``; returns the largest overlap ratio."""
         s, nl, n = self.store, self.neighbours, self.store.count
         nchunk = _chunks(n)
-        walls = not self.periodic.all()
         if nl.half:
             nslab = slab_count(n, nl.longest_jump)
             self._ensure_candidates(nslab)
-            worst = contact_forces_half(s.position, s.velocity, s.diameter, self.mass, s.flags, s.partner, n,
-                                        nl.start, nl.index, self.stiffness_ref, self.diameter_ref, self.damping,
-                                        self.law, nl.period, nl.inverse_period, walls, *self.planes, *self.outlet,
-                                        self.wall_zeta, nslab, self.candidates, self.force)
+            worst = contact_forces_half(s.position, s.velocity, self._bodies(), n, self._contacts(), self.walls,
+                                        nslab, self.candidates, self.force)
         else:
             self._ensure_candidates(nchunk)
-            worst = contact_forces_full(s.position, s.velocity, s.diameter, self.mass, s.flags, s.partner, n,
-                                        nl.start, nl.index, self.stiffness_ref, self.diameter_ref, self.damping,
-                                        self.law, nl.period, nl.inverse_period, walls, *self.planes, *self.outlet,
-                                        self.wall_zeta, nchunk, self.candidates, self.force)
+            worst = contact_forces_full(s.position, s.velocity, self._bodies(), n, self._contacts(), self.walls,
+                                        nchunk, self.candidates, self.force)
         self.max_overlap_ratio = worst
         self.peak_overlap_ratio = max(self.peak_overlap_ratio, worst)
         return worst
@@ -932,8 +1033,9 @@ class DemStepper:
             return None
         steps = int(steps)
         self.peak_overlap_ratio = 0.0
-        return self.thread_choice.run(self.store.count, steps,
-                                      lambda k: self._advance(k, fluid_velocity, impulse))
+        order = self.thread_choice.run(self.store.count, steps, lambda k: self._advance(k, fluid_velocity, impulse))
+        self._read_first_contacts()  # before anyone changes the store
+        return order
 
     def _advance(self, steps, fluid_velocity, impulse):
         s, n, nl = self.store, self.store.count, self.neighbours
@@ -942,8 +1044,8 @@ class DemStepper:
         # compute_forces takes the general path: forces, then kick and drift of consecutive steps in one pass)
         fused = type(self).compute_forces is DemStepper.compute_forces
         self._order = None
-        self._travel_bound += integrate_initial(s.position, s.velocity, self.force, self.mass, self.drag,
-                                                fluid_velocity, self.body_acceleration, self.h, n, nchunk, impulse)
+        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, impulse)
+        self._travel_bound += integrate_initial(s.position, s.velocity, self.force, self.mass, motion, n, nchunk)
         if fused and nl.half:
             self._advance_half(steps, fluid_velocity, impulse)
             return self._order
@@ -951,15 +1053,14 @@ class DemStepper:
             self._keep_list(fluid_velocity, impulse)
             if k + 1 == steps:
                 self.compute_forces()
-                integrate_final(s.velocity, self.force, self.mass, self.drag, self.body_acceleration, self.h, n,
-                                impulse)
+                integrate_final(s.velocity, self.force, self.mass, motion, n)
             elif fused:
                 self._step_fused(fluid_velocity, impulse, nchunk)
             else:
                 self.compute_forces()
-                self._travel_bound += integrate_kick_drift(s.position, s.velocity, self.force, self.mass, self.drag,
-                                                           fluid_velocity, self.body_acceleration, self.h, n,
-                                                           nchunk, impulse)
+                self._travel_bound += integrate_kick_drift(s.position, s.velocity, self.force, self.mass,
+                                                           Motion(self.drag, fluid_velocity, self.body_acceleration,
+                                                                  self.h, impulse), n, nchunk)
             self.steps += 1
         return self._order
 
@@ -971,9 +1072,10 @@ class DemStepper:
         # the sum of the steps' largest displacements bounds every droplet's travel since the build
         if self._travel_bound <= 0.5 * nl.skin:
             return
-        if nl.needs_rebuild(s.position, s.diameter, n):
+        if nl.needs_rebuild(s.position, s.contact_diameter, n):
+            self._read_first_contacts()  # by ident, while the list's entries and indices still match the store
             if self.sort_on_rebuild:
-                new = nl.spatial_order(s.position, s.diameter, n)
+                new = nl.spatial_order(s.position, s.contact_diameter, n)
                 s.reorder(new)
                 self._seen_version = s.version  # this stepper re-sorted its own arrays with the store
                 for arr in (self.mass, self.drag, self.force, impulse) + (
@@ -992,13 +1094,14 @@ class DemStepper:
         self.force[:n] = 0.0
         pending = False
         nslab = slab_count(n, nl.longest_jump)
+        # (a re-sort permutes these arrays in place, so the record stays valid)
+        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, impulse)
         done = 0
         while done < steps:
             if self._travel_bound > 0.5 * nl.skin:
                 if pending:  # bring every droplet to the same time level before checking the list
-                    self._travel_bound += finish_even_slabs(s.position, s.velocity, self.force, self.mass,
-                                                            self.drag, fluid_velocity, self.body_acceleration,
-                                                            self.h, n, nslab, impulse)
+                    self._travel_bound += finish_even_slabs(s.position, s.velocity, self.force, self.mass, motion,
+                                                            n, nslab)
                     pending = False
                 builds = nl.builds
                 self._keep_list(fluid_velocity, impulse)
@@ -1008,11 +1111,8 @@ class DemStepper:
             # after a check the bound is at most skin/2 (0 after a rebuild, the measured travel otherwise), so the
             # loop takes at least one step
             taken, peak, worst, self._travel_bound, pending = step_half_many(
-                steps - done, self._travel_bound, 0.5 * nl.skin, self.lower, s.position, s.velocity, s.diameter,
-                self.mass, s.flags, s.partner, n, nl.start, nl.index, self.stiffness_ref, self.diameter_ref,
-                self.damping, self.law, nl.period, nl.inverse_period, not self.periodic.all(), *self.planes,
-                *self.outlet, self.wall_zeta, self.drag, fluid_velocity, self.body_acceleration, self.h, nslab,
-                self.candidates, impulse, self.force, pending)
+                steps - done, self._travel_bound, 0.5 * nl.skin, self.lower, s.position, s.velocity, self._bodies(),
+                n, self._contacts(), self.walls, motion, nslab, self.candidates, self.force, pending)
             if taken:
                 self.max_overlap_ratio = worst
                 self.peak_overlap_ratio = max(self.peak_overlap_ratio, peak)
@@ -1027,16 +1127,24 @@ class DemStepper:
             self._spare_position = np.zeros_like(s.position)
             self._spare_velocity = np.zeros_like(s.velocity)
         self._ensure_candidates(nchunk)
-        worst, moved = step_fused(s.position, s.velocity, self._spare_position, self._spare_velocity, s.diameter,
-                                  self.mass, s.flags, s.partner, n, nl.start, nl.index, self.stiffness_ref,
-                                  self.diameter_ref, self.damping, self.law, nl.period, nl.inverse_period,
-                                  not self.periodic.all(), *self.planes, *self.outlet, self.wall_zeta, self.drag,
-                                  fluid_velocity, self.body_acceleration, self.h, nchunk, self.candidates, impulse)
+        worst, moved = step_fused(s.position, s.velocity, self._spare_position, self._spare_velocity, self._bodies(),
+                                  n, self._contacts(), self.walls,
+                                  Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, impulse), nchunk,
+                                  self.candidates)
         s.position, self._spare_position = self._spare_position, s.position
         s.velocity, self._spare_velocity = self._spare_velocity, s.velocity
         self.max_overlap_ratio = worst
         self.peak_overlap_ratio = max(self.peak_overlap_ratio, worst)
         self._travel_bound += moved
+
+    def _bodies(self) -> Bodies:
+        s = self.store
+        return Bodies(s.contact_diameter, self.mass, s.flags, s.partner)
+
+    def _contacts(self) -> Contacts:
+        approach = self.approach if self.record_first_contacts else NO_RECORD
+        return contacts_record(self.neighbours, self.damping, self.stiffness_ref, self.diameter_ref, self.law,
+                               approach, self.h)
 
     def _ensure_candidates(self, nchunk):
         longest = self.neighbours.longest_row

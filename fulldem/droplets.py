@@ -15,6 +15,9 @@ Arrays and units:
 
 * ``position`` (cap, 3) [m] centre; ``velocity`` (cap, 3) [m/s];
 * ``diameter`` (cap,) [m] current diameter; ``density`` (cap,) [kg/m^3];
+* ``contact_diameter`` (cap,) [m] the diameter the contacts see: ``diameter``, except for a droplet marked for
+  coalescence, which grows it toward its target (fulldem.coalescence). Grown sizes are for contacts only: volume,
+  mass, buoyancy, drag and the coupling use ``diameter``;
 * ``original_diameter`` (cap,) [m] diameter at the feed composition (Cu2S mass is proportional to its cube);
 * ``age`` (cap,) [s] time since feeding (reaction submodel);
 * ``flags`` (cap,) int32 bit flags (:data:`COALESCING`, ...); ``partner`` (cap,) int64 index of the coalescence
@@ -30,12 +33,15 @@ from settler.physics import merged_diameter_v
 
 #: Flag bit: the droplet is marked for coalescence with ``partner`` (they no longer repel each other).
 COALESCING = 1
+#: Flag bit: the droplet was formed by a merge (the seed paper's Fig. 15 counts coalesced and never-coalesced ones).
+MERGED = 2
 
 FIELDS = {
     "position": (3, np.float64),
     "velocity": (3, np.float64),
     "diameter": (None, np.float64),
     "density": (None, np.float64),
+    "contact_diameter": (None, np.float64),
     "original_diameter": (None, np.float64),
     "age": (None, np.float64),
     "flags": (None, np.int32),
@@ -51,6 +57,7 @@ class DropletStore:
         self.count = 0
         self.next_ident = 0
         self.version = 0  # incremented by every change of the droplet set, order or capacity
+        self.size_version = 0  # incremented by every change of sizes or densities in place (set_sizes, growth)
         self.capacity = max(int(capacity), 1)
         for name, (width, dtype) in FIELDS.items():
             shape = (self.capacity,) if width is None else (self.capacity, width)
@@ -94,6 +101,7 @@ class DropletStore:
         sl = slice(start, start + n)
         values = {"position": position, "diameter": diameter, "density": density, "partner": -1,
                   "original_diameter": diameter if original_diameter is None else original_diameter,
+                  "contact_diameter": diameter,
                   **({} if velocity is None else {"velocity": velocity}), **({} if age is None else {"age": age}),
                   **fields, "ident": np.arange(self.next_ident, self.next_ident + n)}
         for name in FIELDS:
@@ -122,21 +130,25 @@ class DropletStore:
         remapped = np.full(n, -1, dtype=np.int64)
         remapped[valid] = new_index[partner[keep][valid]]
         self.partner[:n] = remapped
-        lost_partner = self.partner[:n] < 0
+        lost_partner = (self.partner[:n] < 0) & ((self.flags[:n] & COALESCING) != 0)
         self.flags[:n][lost_partner] &= ~np.int32(COALESCING)
+        self.contact_diameter[:n][lost_partner] = self.diameter[:n][lost_partner]
         self.partner[n: self.count] = -1
         self.count = n
         self.version += 1
 
-    def merge(self, first, second) -> np.ndarray:
+    def merge(self, first, second, lower=None, period=None) -> np.ndarray:
         """Replace each pair (``first[k]``, ``second[k]``) of live droplets by one droplet; returns the merged
         droplets' indices after the store is compacted.
 
         The merged droplet conserves each pair's volume, mass (so its density is the mass over the volume), momentum
         (it sits at the centre of mass, at the centre-of-mass velocity), Cu2S (its original volume is the sum of the
         original volumes) and mass x age (its age is the mass-weighted age); it takes the lower index's slot and a
-        new ident, with no flags and no partner (droplets partnered with either one lose their partner). Pairs must
-        be disjoint. Other fields of :data:`FIELDS` take the lower index's value.
+        new ident, its contact diameter is its diameter, it is flagged :data:`MERGED` and has no partner (droplets
+        partnered with either one lose their partner and their grown size). Pairs must be disjoint. Other fields of
+        :data:`FIELDS` take the lower index's value. In a periodic box (``period`` (3,) [m], 0 on bounded axes, and
+        the box's ``lower`` corner (3,) [m]) the centre of mass is taken over the pair's nearest images and wrapped
+        back into the box.
         """
         i = np.asarray(first, dtype=np.int64).ravel()
         j = np.asarray(second, dtype=np.int64).ravel()
@@ -151,7 +163,18 @@ class DropletStore:
         mass_k, mass_g = self.density[keep] * volume_k, self.density[gone] * volume_g
         mass, volume = mass_k + mass_g, volume_k + volume_g
         wk, wg = (mass_k / mass)[:, None], (mass_g / mass)[:, None]
-        self.position[keep] = wk * self.position[keep] + wg * self.position[gone]
+        other = self.position[gone]
+        period = np.zeros(3) if period is None else np.asarray(period, dtype=float)
+        periodic = period > 0.0
+        safe = np.where(periodic, period, 1.0)
+        if periodic.any():  # the nearest image of the second droplet
+            delta = other - self.position[keep]
+            other = self.position[keep] + np.where(periodic, delta - period * np.rint(delta / safe), delta)
+        self.position[keep] = wk * self.position[keep] + wg * other
+        if periodic.any():
+            lower = np.asarray(lower, dtype=float)
+            wrapped = lower + np.mod(self.position[keep] - lower, safe)
+            self.position[keep] = np.where(periodic, wrapped, self.position[keep])
         self.velocity[keep] = wk * self.velocity[keep] + wg * self.velocity[gone]
         self.age[keep] = wk[:, 0] * self.age[keep] + wg[:, 0] * self.age[gone]
         self.original_diameter[keep] = merged_diameter_v(self.original_diameter[keep], self.original_diameter[gone])
@@ -162,13 +185,44 @@ class DropletStore:
         partnered = np.isin(self.partner[:n], both)
         self.partner[:n][partnered] = -1
         self.flags[:n][partnered] &= ~np.int32(COALESCING)
-        self.partner[keep], self.flags[keep] = -1, 0
+        self.contact_diameter[:n][partnered] = self.diameter[:n][partnered]
+        self.contact_diameter[keep] = self.diameter[keep]
+        self.partner[keep], self.flags[keep] = -1, MERGED
         self.ident[keep] = np.arange(self.next_ident, self.next_ident + keep.size)
         self.next_ident += keep.size
         mask = np.zeros(n, dtype=bool)
         mask[gone] = True
         self.remove(mask)
         return keep - np.searchsorted(np.sort(gone), keep)
+
+    def mark_pairs(self, first, second) -> None:
+        """Mark each pair (``first[k]``, ``second[k]``) of free live droplets for coalescence: flag
+        :data:`COALESCING` and point each at the other (mutual partners exert no contact force on each other)."""
+        i = np.asarray(first, dtype=np.int64).ravel()
+        j = np.asarray(second, dtype=np.int64).ravel()
+        both = np.concatenate([i, j])
+        if i.shape != j.shape or np.unique(both).size != both.size \
+                or (both.size and ((self.flags[both] & COALESCING) != 0).any()):
+            raise ValueError("droplets: mark_pairs() takes disjoint pairs of droplets not yet marked")
+        self.flags[both] |= COALESCING
+        self.partner[i], self.partner[j] = j, i
+
+    def set_contact_diameters(self, index, contact_diameter) -> None:
+        """Set the contact diameters [m] of the given droplets (a marked pair's growth; at least their diameters)."""
+        index = np.asarray(index, dtype=np.int64)
+        self.contact_diameter[index] = np.maximum(contact_diameter, self.diameter[index])
+        self.size_version += 1
+
+    def set_sizes(self, diameter, density) -> None:
+        """Set every live droplet's diameter [m] and density [kg/m^3] in place (the reaction); contact diameters
+        follow: equal to the diameter, or a marked droplet's grown size if larger."""
+        n = self.count
+        self.diameter[:n] = diameter
+        self.density[:n] = density
+        marked = (self.flags[:n] & COALESCING) != 0
+        self.contact_diameter[:n] = np.where(marked, np.maximum(self.contact_diameter[:n], self.diameter[:n]),
+                                             self.diameter[:n])
+        self.size_version += 1
 
     def reorder(self, order) -> None:
         """Permute the live droplets so that new p is old ``order[p]`` (a permutation of range(count)).
@@ -200,6 +254,8 @@ class DropletStore:
     def restore(self, state: dict) -> None:
         """Take the droplets of :meth:`state` in place of the current ones (every field of :data:`FIELDS`; a field
         missing from ``state`` raises KeyError naming it)."""
+        if "contact_diameter" not in state and "diameter" in state:  # a checkpoint from before grown sizes existed
+            state = {**state, "contact_diameter": state["diameter"]}
         missing = [name for name in FIELDS if name not in state]
         if missing:
             raise KeyError(f"droplet state has no field(s) {missing}")

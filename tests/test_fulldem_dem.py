@@ -210,7 +210,11 @@ def test_reorder_store_keeps_droplets_and_partners():
 
 
 # ------------------------------------------------------------------------------------------------ kernels vs twins
-NO_WALLS = (False, np.zeros(3), np.ones(3), -1, 0.0, 0.0, 0.0, 0.0)
+NO_WALLS = dem.walls_record(np.zeros(3), np.ones(3), (True, True, True), False, None, 1.0, 1.0, 0.0, 0)
+
+
+def _bodies(store, mass):
+    return dem.Bodies(store.diameter, mass, store.flags, store.partner)
 
 
 def _full_list_forces(store, mass, nl, k_ref, d_ref, zeta, force, walls=NO_WALLS, nchunk=4):
@@ -218,9 +222,8 @@ def _full_list_forces(store, mass, nl, k_ref, d_ref, zeta, force, walls=NO_WALLS
     candidates = np.zeros((nchunk, max(nl.longest_row, 1)), dtype=np.int32)
     damping = np.full(nl.index.shape[0], np.nan)
     dem.pair_damping(nl.start, nl.index, store.diameter, mass, n, k_ref, d_ref, zeta, damping)
-    return dem.contact_forces_full(store.position, store.velocity, store.diameter, mass, store.flags, store.partner,
-                                   n, nl.start, nl.index, k_ref, d_ref, damping, 0, nl.period, nl.inverse_period,
-                                   *walls, nchunk, candidates, force)
+    return dem.contact_forces_full(store.position, store.velocity, _bodies(store, mass), n,
+                                   dem.contacts_record(nl, damping, k_ref, d_ref, 0), walls, nchunk, candidates, force)
 
 
 def _cluster(rng, n=50, periodic=(False, False, False)):
@@ -259,9 +262,8 @@ def test_contact_kernels_match_numpy_twin(periodic, half):
         damping = np.full(nl.index.shape[0], np.nan)
         dem.pair_damping(nl.start, nl.index, store.diameter, mass, n, 3.0, 0.5e-3, zeta, damping)
         nslab = dem.slab_count(n, nl.longest_jump)
-        worst = dem.contact_forces_half(store.position, store.velocity, store.diameter, mass, store.flags,
-                                        store.partner, n, nl.start, nl.index, 3.0, 0.5e-3, damping, law, nl.period,
-                                        nl.inverse_period, *NO_WALLS, nslab,
+        worst = dem.contact_forces_half(store.position, store.velocity, _bodies(store, mass), n,
+                                        dem.contacts_record(nl, damping, 3.0, 0.5e-3, law), NO_WALLS, nslab,
                                         np.zeros((nslab, nl.longest_row), dtype=np.int32), force)
     else:
         worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, zeta, force)
@@ -299,9 +301,9 @@ def test_half_list_slabs_agree_with_one_slab_and_with_the_full_list():
     for nslab in [1, *safe]:
         force = np.full((n, 3), np.nan)
         candidates = np.zeros((nslab, half.longest_row), dtype=np.int32)
-        worst = dem.contact_forces_half(store.position, store.velocity, store.diameter, mass, store.flags,
-                                        store.partner, n, half.start, half.index, 3.0, 0.5e-3, damping, 0,
-                                        half.period, half.inverse_period, *NO_WALLS, nslab, candidates, force)
+        worst = dem.contact_forces_half(store.position, store.velocity, _bodies(store, mass), n,
+                                        dem.contacts_record(half, damping, 3.0, 0.5e-3, 0), NO_WALLS, nslab,
+                                        candidates, force)
         results.append((force, worst))
     full = nb.NeighbourList((0, 0, 0), box, (False, False, False), 0.1e-3, half=False)
     full.build(store.position, store.diameter, n)
@@ -348,8 +350,8 @@ def test_wall_kernel_matches_numpy_twin(absorbing_bottom):
     outlet = (1, 2.5e-3, 1.5e-3, 1.2e-3)
     force = rng.normal(0, 1e-6, (n, 3))
     before = force.copy()
-    worst = dem.wall_forces(pos, vel, d, mass, n, box_lower, box_upper, periodic, absorbing_bottom, *outlet, 2.0,
-                            0.5e-3, 0.3, 0, 4, force)
+    worst = dem.wall_forces(pos, vel, d, mass, n, dem.walls_record(box_lower, box_upper, periodic, absorbing_bottom,
+                                                                   outlet, 2.0, 0.5e-3, 0.3, 0), 4, force)
     ref, ref_worst = reference.wall_forces_reference(pos, vel, d, mass, n, box_lower, box_upper, periodic,
                                                absorbing_bottom, *outlet, 2.0, 0.5e-3, 0.3, 0)
     np.testing.assert_allclose(force - before, ref, rtol=1e-12, atol=1e-20)
@@ -375,11 +377,12 @@ def test_full_list_kernel_applies_the_same_walls():
     geometry = (np.zeros(3), box, periodic, False, 0, 0.6e-3, 0.7e-3, 0.5e-3)
     fused = np.zeros((n, 3))
     planes = dem.wall_planes(np.zeros(3), box, periodic, False)
-    worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, fused, walls=(True, *planes, *geometry[4:], 0.35))
+    walls = dem.walls_record(*geometry[:4], geometry[4:], 3.0, 0.5e-3, 0.35, 0)
+    assert np.array_equal(walls.lower, planes[0]) and np.array_equal(walls.upper, planes[1])
+    worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, fused, walls=walls)
     apart = np.zeros((n, 3))
     worst_pairs = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, apart)
-    worst_walls = dem.wall_forces(store.position, store.velocity, store.diameter, mass, n, *geometry, 3.0, 0.5e-3,
-                                  0.35, 0, 2, apart)
+    worst_walls = dem.wall_forces(store.position, store.velocity, store.diameter, mass, n, walls, 2, apart)
     np.testing.assert_allclose(fused, apart, rtol=1e-13, atol=1e-14 * np.abs(apart).max())
     assert worst == max(worst_pairs, worst_walls) and worst_walls > 0.0
 
@@ -404,9 +407,10 @@ def test_integrator_kernels_match_numpy_twin(uniform_fluid):
     drag = np.zeros((n, 3))
     dem.drag_factors_into(mass, beta, h, n, drag)
     x, v, impulse = pos.copy(), vel.copy(), np.zeros((n, 3))
-    moved = dem.integrate_initial(x, v, force_old, mass, drag, fluid, body, h, n, 3, impulse)
+    motion = dem.Motion(drag, fluid, body, h, impulse)
+    moved = dem.integrate_initial(x, v, force_old, mass, motion, n, 3)
     force_new = force_new_of(x, v)
-    dem.integrate_final(v, force_new, mass, drag, body, h, n, impulse)
+    dem.integrate_final(v, force_new, mass, motion, n)
     x_ref, v_ref, j_ref = reference.integrate_reference(pos, vel, force_old, force_new_of, mass, beta, fluid, body, h, n)
     np.testing.assert_allclose(x, x_ref, rtol=1e-13, atol=1e-18)
     np.testing.assert_allclose(v, v_ref, rtol=1e-12, atol=1e-18)
