@@ -42,7 +42,9 @@ from settler.output import (OutputError, atomic_write_text, mass_balance_error, 
                             read_time_series, time_series_frame, to_json, write_run_metadata, write_time_series)
 
 from . import fluid as fl
+from .coalescence import size_table_frame
 from .coupling import filtered_width_allowed
+from .droplets import MERGED
 from .droplet_list import DropletListError, read_droplet_list
 from .io import CheckpointError, Progress, SnapshotWriter, load_checkpoint, save_checkpoint
 from .stepper import Counters, Simulation
@@ -148,6 +150,8 @@ def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
         & (np.abs(s.position[:n, 2] - mid) <= 0.1 * sim.grid.size[2])
     in_slag = sim.mass_in_slag()
     fed = c.mass_fed + sim.initial_mass
+    coalesced = int(((s.flags[:n] & MERGED) != 0).sum())
+    merges, c.merges_reported = c.merges - c.merges_reported, c.merges
     return {
         "time": sim.time,
         "droplet_count": n,
@@ -161,6 +165,9 @@ def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
         "mass_lost": c.mass_lost,
         "mass_reacted": c.mass_reacted,
         "mass_balance_error": float(mass_balance_error(fed, in_slag, c.mass_settled, c.mass_lost, c.mass_reacted)),
+        "coalesced_count": coalesced,
+        "uncoalesced_count": n - coalesced,
+        "merges": merges,
         "max_cell_reynolds": sim.last.get("max_cell_reynolds", math.nan),
         "max_cfl": sim.last.get("max_cfl", math.nan),
         "max_overlap_ratio": sim.last.get("max_overlap_ratio", math.nan),
@@ -208,7 +215,7 @@ def checkpoint_state(sim: Simulation):
     if sim.dem.ready:
         arrays.update({f"list_{k}": v for k, v in sim.dem.list_state().items()})
     meta = {"time": sim.time, "steps": sim.steps, "next_ident": sim.store.next_ident,
-            "counters": vars(sim.counters), "initial_mass": sim.initial_mass, "dem_stale": not sim.dem.ready,
+            "counters": sim.counters.state(), "initial_mass": sim.initial_mass, "dem_stale": not sim.dem.ready,
             "schedule": {"fed_mass": sim.schedule.fed_mass, "time": sim.schedule.time,
                          "rng": sim.schedule._rng.bit_generator.state},
             "rng": sim.rng.bit_generator.state, "feed_on": bool(sim.feed_on),
@@ -457,7 +464,9 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     plot_time_series(out, f"{case.case.name}: fulldem")
     plot_droplets(out / "droplets.png", sim.store.position[:n], sim.store.diameter[:n], sim.store.velocity[:n],
                   sim.lower, sim.upper, f"{case.case.name} at t = {sim.time:.3g} s: {n} droplets")
-    summary = {"end_time": sim.time, "steps": sim.steps, "droplets": sim.store.count, **vars(sim.counters),
+    if case.coalescence.enabled:
+        atomic_write_text(out / "merges_by_size.csv", size_table_frame(sim.counters.merges_by_size).to_csv(index=False))
+    summary = {"end_time": sim.time, "steps": sim.steps, "droplets": sim.store.count, **sim.counters.totals(),
                "feed_backlog": sim.backlog_mass()}
     atomic_write_text(out / "summary.json", to_json(summary))
     log(f"done: t = {sim.time:.6g} s, {sim.store.count} droplets in the slag; outputs in {out} "

@@ -30,7 +30,7 @@ Momentum: droplets and fluid exchange drag and pressure forces through adjoint w
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit, prange
@@ -44,6 +44,7 @@ from .contacts import effective_mass, stable_step, stiffness_for_overlap
 from .dem import DemStepper, droplet_masses, max_speed
 from .droplets import DropletStore
 from .boundaries import boundaries_for
+from .coalescence import empty_size_table
 from .feeding import classify_exits, draw_inlet_candidates, place_without_overlap
 from .forces import DRAG_LAWS, drag_coefficients
 from .grid import Grid
@@ -115,7 +116,10 @@ def owed_rows(impulse, external, duration, count, scale, values):
 
 @dataclass
 class Counters:
-    """Matte mass bookkeeping [kg] and event counts since t = 0."""
+    """Matte mass bookkeeping [kg] and event counts since t = 0 (``recreated``: the stepped reaction's changes of
+    material); ``merges_reported``: ``merges`` at the last
+    time-series row; ``merges_by_size``: merges by the size bins of the two droplets
+    (:func:`fulldem.coalescence.size_bin`, smaller first)."""
 
     mass_fed: float = 0.0
     mass_settled: float = 0.0
@@ -125,6 +129,20 @@ class Counters:
     settled: int = 0
     lost: int = 0
     merges: int = 0
+    recreated: int = 0
+    merges_reported: int = 0
+    merges_by_size: np.ndarray = field(default_factory=empty_size_table)
+
+    def __post_init__(self):
+        self.merges_by_size = np.asarray(self.merges_by_size, dtype=np.int64).reshape(empty_size_table().shape)
+
+    def state(self) -> dict:
+        """Plain JSON-able numbers (the size table as nested lists)."""
+        return {**vars(self), "merges_by_size": self.merges_by_size.tolist()}
+
+    def totals(self) -> dict:
+        """The counts and masses without the size table (for summaries)."""
+        return {k: v for k, v in vars(self).items() if k not in ("merges_by_size", "merges_reported")}
 
 
 class StepDiagnostics(dict):
@@ -201,7 +219,7 @@ class Simulation:
         self.dem = DemStepper(self.store, self.lower, self.grid.size, self.periodic, self.h, self.stiffness_ref,
                               d_ref, fd.restitution, SKIN_MIN * d_ref, np.zeros(3),
                               absorbing_bottom=self.bounds.absorbing_bottom, outlet=self.bounds.contact_outlet(),
-                              sort_on_rebuild=False)
+                              sort_on_rebuild=False, record_first_contacts=case.coalescence.enabled)
 
         # coupling tables and work arrays
         self.kernel = (fd.sigma_cells, fd.sigma_diameter, cp.DEFAULT_CUT)
@@ -426,6 +444,8 @@ class Simulation:
         rebuilt = not self.dem.ready
         if rebuilt:  # one list build per step for this step's insertions, the last one's exits and a sort
             self.dem.droplets_changed()  # computes the contact forces at this state too
+        elif self.dem.sizes_stale:  # sizes changed in place at the last event point (growth, reaction)
+            self.dem.sizes_changed()
         n = s.count
         inv_cell_volume = 1.0 / self.grid.cell_volume
 
@@ -514,8 +534,13 @@ class Simulation:
             self._merges = []
             ident = self.store.ident
             order = np.argsort(np.minimum(ident[first], ident[second]), kind="stable")
-            self.store.merge(first[order], second[order])
+            self.merge(first[order], second[order])
             self.counters.merges += len(order)
+
+    def merge(self, first, second):
+        """Merge pairs of droplets now (:meth:`fulldem.droplets.DropletStore.merge`, periodic images taken into
+        account); only at an event point."""
+        return self.store.merge(first, second, self.lower, self.dem.neighbours.period)
 
     def skin_for(self, speed):
         """Neighbour-list skin [m] for droplets moving at most ``speed`` [m/s] (see :func:`fulldem.tuning.skin_for`)."""

@@ -15,6 +15,8 @@ submodel is a subclass here and an entry in :data:`CASE_SUBMODELS`.
 
 from __future__ import annotations
 
+import importlib
+
 
 class Submodel:
     """A process acting on a simulation at the step's event points (both hooks do nothing by default)."""
@@ -56,18 +58,27 @@ class Exits(Submodel):
         sim.remove_exits()
 
 
-#: Submodels switched on by a case section's ``enabled`` key: section -> class, or None where the engine does not
-#: have it yet (a run then says so; see fulldem.driver).
-CASE_SUBMODELS: dict[str, type[Submodel] | None] = {"coalescence": None, "reaction": None}
+#: Submodels switched on by a case section's ``enabled`` key: section -> "module:Class" of the submodel (constructed
+#: with the case; named, not imported, so that a submodel's module may import this one), or None where the engine
+#: does not have it yet (a run then says so; see fulldem.driver).
+CASE_SUBMODELS: dict[str, str | None] = {"coalescence": "fulldem.coalescence:Coalescence",
+                                         "reaction": "fulldem.reaction:Reaction"}
+
+
+def submodel_class(section: str) -> type[Submodel]:
+    """The submodel class switched on by case section ``section`` (:data:`CASE_SUBMODELS`)."""
+    module, name = CASE_SUBMODELS[section].split(":")
+    return getattr(importlib.import_module(module), name)
 
 
 def missing_submodels(case) -> list[str]:
     """The case's switched-on submodels that the engine does not have yet."""
-    return [name for name, cls in CASE_SUBMODELS.items() if cls is None and getattr(case, name).enabled]
+    return [name for name, spec in CASE_SUBMODELS.items() if spec is None and getattr(case, name).enabled]
 
 
 def submodels_for(case) -> list[Submodel]:
     """The submodels of a run of ``case``, in the order they act at each event point: feed (start), merges, the
     case's switched-on submodels, exits (end)."""
-    chosen = [cls() for name, cls in CASE_SUBMODELS.items() if cls is not None and getattr(case, name).enabled]
+    chosen = [submodel_class(name)(case) for name, spec in CASE_SUBMODELS.items()
+              if spec is not None and getattr(case, name).enabled]
     return [Feed(), Merges(), *chosen, Exits()]

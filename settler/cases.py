@@ -129,6 +129,11 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "threshold": Field(F, "-", "A colliding pair coalesces when P_c >= threshold.", 0.0, 1.0),
         "growth_target": Field(F, "-", "Marked droplets grow until this fraction of the merged size.", 0.0, 1.0,
                                exclusive_minimum=True),
+        "growth_rate": Field(F, "1/s", "Growth speed of a marked droplet's contact diameter, in merged diameters per "
+                                       "second (full engine).", 0.0, exclusive_minimum=True),
+        "mode": Field(S, "", "'delayed': marked pairs grow, then merge (seed paper); 'instantaneous': merge at first "
+                             "contact (the paper's previous model, section 4.1; full engine).",
+                      choices=("delayed", "instantaneous")),
     },
     "reaction": {
         "enabled": Field(B, "", "Reaction submodel (FeS removal: droplets shrink and densify) on or off."),
@@ -138,6 +143,11 @@ SCHEMA: dict[str, dict[str, Field]] = {
                          exclusive_minimum=True),
         "time_constant": Field(F, "s", "Time constant tau of X(age) = X_inf - (X_inf - X0) exp(-age/tau).", 0.0,
                                exclusive_minimum=True),
+        "mode": Field(S, "", "'continuous': every droplet follows the fit's density and size (default); 'stepped': "
+                             "the seed paper's EDEM materials, density rounded to steps of density_step (full "
+                             "engine).", choices=("continuous", "stepped")),
+        "density_step": Field(F, "kg/m^3", "Density step between the materials of mode = 'stepped'.", 0.0,
+                              exclusive_minimum=True),
         "oxygen_pressure": Field(F, "Pa", "Oxygen partial pressure for end_state = 'equilibrium'.", 0.0,
                                  exclusive_minimum=True),
         "so2_pressure": Field(F, "Pa", "SO2 partial pressure for end_state = 'equilibrium'.", 0.0,

@@ -34,6 +34,10 @@ TIME_SERIES: dict[str, tuple[str, str]] = {
     "mass_lost": ("kg", "matte mass that left through the outlet since t = 0"),
     "mass_reacted": ("kg", "FeS mass removed from droplets by the reaction since t = 0"),
     "mass_balance_error": ("-", "(fed - in slag - settled - lost - reacted) / max(fed, tiny)"),
+    "coalesced_count": ("-", "droplets in the slag formed by coalescence (seed paper Fig. 15; full engine, NaN in reduced)"),
+    "uncoalesced_count": ("-", "droplets in the slag that never coalesced (seed paper Fig. 15; full engine, NaN in "
+                               "reduced)"),
+    "merges": ("-", "coalescence events since the previous row (full engine; NaN in reduced)"),
     "max_cell_reynolds": ("-", "largest cell Reynolds number of the slag flow (full engine; NaN in reduced)"),
     "max_cfl": ("-", "largest advective CFL number of the slag flow (full engine; NaN in reduced)"),
     "max_overlap_ratio": ("-", "largest contact overlap / smaller diameter (full engine; NaN in reduced)"),
@@ -46,7 +50,7 @@ TIME_SERIES: dict[str, tuple[str, str]] = {
 #: Files a run of either engine writes into its output folder (plus the numbered snapshots of SNAPSHOT_PATTERNS):
 #: a folder holding any of them holds a run.
 RUN_FILES = ("case.toml", "metadata.json", "timeseries.csv", "timeseries.png", "summary.json", "checkpoint.npz",
-             "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz")
+             "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz", "merges_by_size.csv")
 SNAPSHOT_PATTERNS = ("droplets_*.vtu", "fluid_*.vtu")
 
 

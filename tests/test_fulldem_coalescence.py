@@ -1,0 +1,182 @@
+"""The coalescence submodel (seed paper section 3.3.1) against its definition and conservation laws.
+
+References: the first contact's approach speed is the relative speed of two droplets closing in a vacuum (exact);
+the merged droplet conserves volume (d^3 summed), mass, momentum and Cu2S exactly; grown sizes never reach the fluid
+(the deposited droplet volume equals the true volumes at every step, to round-off); the size limit and the P_c
+threshold refuse what they must; a run repeats bit for bit.
+"""
+
+import math
+
+import numba
+import numpy as np
+import pytest
+
+from fulldem import dem
+from fulldem.coalescence import SIZE_BINS, size_bin
+from fulldem.droplets import COALESCING, MERGED, DropletStore
+from fulldem.stepper import Simulation
+from settler.cases import load_case
+from settler.physics import coalescence_probability
+
+BOX = 0.04
+SMALL_BOX = ["feed.mass_rate=0", "fulldem.cell_size=0.005", "fulldem.fluid_step=0.002"]
+
+
+@pytest.mark.parametrize("half", [True, False])
+def test_first_contact_records_the_approach_speed_once(half):
+    """Two droplets closing at 0.05 m/s with no drag and no gravity: the record holds the pair once, with the
+    closing speed (exact: nothing acts before they touch), and nothing is recorded while they stay in contact."""
+    store = DropletStore(8)
+    d = 0.5e-3
+    store.add([[2e-3, 2e-3, 2e-3], [2e-3 + d + 2e-5, 2e-3, 2e-3]], d, 5000.0,
+              velocity=[[0.03, 0.0, 0.0], [-0.02, 0.0, 0.0]])
+    stepper = dem.DemStepper(store, (0, 0, 0), (4e-3,) * 3, (False, False, False), 1e-5, 5.0, d, 0.5, 0.1e-3,
+                             (0, 0, 0), half_list=half, record_first_contacts=True)
+    stepper.droplets_changed()
+    stepper.set_drag(np.zeros(store.capacity))
+    fluid = np.zeros((1, 3))
+    a, b, speed = stepper.take_first_contacts()
+    assert a.size == 0
+    stepper.advance(20, fluid, dem.NO_IMPULSE)  # 20 um gap at 0.05 m/s: touching after 40 steps
+    assert stepper.take_first_contacts()[0].size == 0
+    stepper.advance(30, fluid, dem.NO_IMPULSE)
+    a, b, speed = stepper.take_first_contacts()
+    assert sorted({int(a[0]), int(b[0])}) == [0, 1] and a.size == (1 if half else 2)
+    assert speed == pytest.approx(0.05, rel=1e-12)
+    stepper.advance(10, fluid, dem.NO_IMPULSE)  # still in contact: no new first contact
+    assert stepper.take_first_contacts()[0].size == 0
+
+
+def _two_droplets(extra=(), large=1.0e-3, small=0.5e-3):
+    """A large droplet 1 mm above a small one in quiescent slag: it settles faster and catches up."""
+    case = load_case("simple", [*SMALL_BOX, *extra])
+    store = DropletStore(16)
+    store.add([[0.02, 0.02, 0.03], [0.02, 0.02, 0.03 - 1.0e-3]], [large, small], 5100.0, age=[1.0, 3.0])
+    return Simulation(case, droplets=store, feed=False, box=((BOX,) * 3, (0.0, 0.0, 0.0)))
+
+
+def _deposited_volume(sim):
+    """The droplet volume the fluid sees: the integral of 1 - eps over the cells [m^3]."""
+    cells = sim.void_fraction()[1]
+    return float(np.sum(1.0 - cells) * sim.grid.cell_volume)
+
+
+def test_a_pair_is_marked_grows_and_merges_conserving_everything(monkeypatch):
+    sim = _two_droplets()
+    s = sim.store
+    before = {}
+    merge = s.merge
+
+    def spy(first, second, *periodic):  # the state the merge starts from, at the event point
+        before.update(position=s.position[:2].copy(), velocity=s.velocity[:2].copy(), age=s.age[:2].copy())
+        return merge(first, second, *periodic)
+
+    monkeypatch.setattr(s, "merge", spy)
+    d = s.diameter[:2].copy()
+    mass = s.density[:2] * math.pi / 6 * d**3
+    true_volume = math.pi / 6 * float(np.sum(d**3))
+    marked_at = grown = None
+    for step in range(400):
+        sim.step()
+        if s.count == 2 and (s.flags[0] & COALESCING):
+            marked_at = marked_at if marked_at is not None else step
+            assert s.partner[0] == 1 and s.partner[1] == 0
+            # grown sizes are for contacts only: the fluid sees the true volumes
+            assert _deposited_volume(sim) == pytest.approx(true_volume, rel=1e-12)
+            assert np.array_equal(s.diameter[:2], d)
+            grown = s.contact_diameter[1]
+        if s.count == 1:
+            break
+    assert marked_at is not None and grown > 1.5 * d[1]
+    assert s.count == 1 and sim.counters.merges == 1
+    merged = (d[0] ** 3 + d[1] ** 3) ** (1 / 3)
+    assert s.diameter[0] == pytest.approx(merged, rel=1e-14)
+    assert s.contact_diameter[0] == s.diameter[0] and s.flags[0] == MERGED and s.partner[0] == -1
+    assert s.density[0] * math.pi / 6 * s.diameter[0] ** 3 == pytest.approx(mass.sum(), rel=1e-14)
+    # the merge at the event point: centre of mass, summed momentum and mass x age of the state just before it
+    pos, vel, age = before["position"], before["velocity"], before["age"]
+    w = mass / mass.sum()
+    np.testing.assert_allclose(s.position[0], w @ pos, rtol=1e-14)
+    np.testing.assert_allclose(s.velocity[0], w @ vel, rtol=1e-12)
+    assert s.age[0] == pytest.approx(w @ age, rel=1e-14)
+    assert _deposited_volume(sim) == pytest.approx(true_volume, rel=1e-12)
+    table = sim.counters.merges_by_size
+    assert table.sum() == 1 and table[size_bin(d[1]), size_bin(d[0])] == 1
+    assert SIZE_BINS[size_bin(d[1]) - 1] <= d[1] < SIZE_BINS[size_bin(d[1])]
+
+
+@pytest.mark.parametrize("extra", [["coalescence.size_limit=1.03e-3"], ["coalescence.threshold=1.0"]],
+                         ids=["size_limit", "threshold"])
+def test_no_merge_beyond_the_size_limit_or_below_the_threshold(extra):
+    """The merged droplet would be 1.040 mm: a 1.03 mm limit refuses it; P_c < 1 at any approach speed, so a
+    threshold of 1 refuses every pair. The droplets then touch and push each other as without coalescence."""
+    sim = _two_droplets(extra)
+    s = sim.store
+    touched = False
+    for _ in range(300):
+        sim.step()
+        gap = np.linalg.norm(s.position[0] - s.position[1]) - 0.5 * (s.diameter[0] + s.diameter[1])
+        touched |= gap < 0.0
+        assert s.count == 2 and not (s.flags[:2] & COALESCING).any()
+    assert touched and sim.counters.merges == 0
+    # and the pair's probability was indeed below 1 (the threshold case is not vacuous)
+    assert coalescence_probability(1e-3, 0.5e-3, 1e-3, 5100.0, 3150.0, 0.5) < 1.0
+
+
+def test_instantaneous_mode_merges_at_first_contact():
+    sim = _two_droplets(["coalescence.mode=instantaneous"])
+    s = sim.store
+    for _ in range(300):
+        sim.step()
+        assert not (s.flags[: s.count] & COALESCING).any()  # never marked
+        if s.count == 1:
+            break
+    assert s.count == 1 and sim.counters.merges == 1 and s.flags[0] == MERGED
+
+
+def _cloud(threads):
+    """294 droplets of 0.6-1.6 mm in a periodic box whose pressure gradient carries their weight: many
+    collisions and merges in 60 steps."""
+    case = load_case("simple", [*SMALL_BOX, "coalescence.size_limit=4e-3", "coalescence.growth_rate=20"])
+    rng = np.random.default_rng(7)
+    size, spacing = 0.03, 1.8e-3
+    lattice = np.stack(np.meshgrid(*(np.arange(7),) * 2, np.arange(6), indexing="ij"), -1).reshape(-1, 3)
+    n = len(lattice)
+    store = DropletStore(512)  # on a jittered lattice: no overlaps at the start, gaps of 0.1-1.2 mm
+    store.add((lattice + 1.0) * spacing + rng.uniform(-0.05e-3, 0.05e-3, (n, 3)), rng.uniform(0.6e-3, 1.6e-3, n),
+              5100.0, velocity=rng.normal(0.0, 0.01, (n, 3)), age=rng.uniform(0.0, 5.0, n))
+    weight = np.sum((5100.0 - 3150.0) * math.pi / 6 * store.diameter[:n] ** 3) * 9.80665
+    numba.set_num_threads(threads)
+    try:
+        sim = Simulation(case, droplets=store, feed=False, box=((size,) * 3, (0.0, 0.0, 0.0)),
+                         periodic=(True, True, True), body_force=(0.0, 0.0, weight / size**3))
+        sim.step()
+        start, scale = sim.momentum(), np.sum(np.abs(sim.impulse[: sim.store.count]))
+        mass0 = float(np.sum(store.mass()))
+        cu0 = float(np.sum(store.original_diameter[: store.count] ** 3))
+        for _ in range(150):
+            sim.step()
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    return sim, start, scale, mass0, cu0
+
+
+def test_merges_in_a_cloud_conserve_momentum_and_matte_and_repeat_exactly():
+    """Many merges in a settling cloud: the total momentum stays constant to round-off, matte mass and Cu2S are
+    conserved, and a second run with the same seed on the same threads (two, where there are two) is identical bit
+    for bit. (One and two threads agree only to round-off, 1e-18 m here, with or without coalescence: some of the
+    fluid solver's sums are split by thread.)"""
+    threads = min(2, numba.config.NUMBA_NUM_THREADS)
+    one, start, scale, mass0, cu0 = _cloud(threads)
+    s = one.store
+    assert one.counters.merges >= 5 and s.count == 294 - one.counters.merges
+    assert (s.flags[: s.count] & COALESCING).any()  # some pairs still growing
+    assert np.abs(one.momentum() - start).max() < 1e-10 * scale
+    assert float(np.sum(s.mass())) == pytest.approx(mass0, rel=1e-13)
+    assert float(np.sum(s.original_diameter[: s.count] ** 3)) == pytest.approx(cu0, rel=1e-13)
+    assert int(((s.flags[: s.count] & MERGED) != 0).sum()) >= 1
+    two = _cloud(threads)[0]
+    assert two.counters.merges == one.counters.merges
+    for name in ("position", "velocity", "diameter", "contact_diameter", "flags", "partner", "ident"):
+        assert np.array_equal(getattr(two.store, name)[: two.store.count], getattr(s, name)[: s.count]), name
