@@ -39,8 +39,10 @@ import numpy as np
 
 from settler.cases import CaseError, load_case
 from settler.output import (OutputError, atomic_write_text, mass_balance_error, prepare_output_folder,
-                            read_time_series, time_series_frame, to_json, write_run_metadata, write_time_series)
+                            read_channel_profile, read_time_series, time_series_frame, to_json,
+                            write_channel_profile, write_run_metadata, write_time_series)
 
+from . import channel
 from . import fluid as fl
 from .coalescence import size_table_frame
 from .coupling import filtered_width_allowed
@@ -165,6 +167,7 @@ def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
         "mass_lost": c.mass_lost,
         "mass_reacted": c.mass_reacted,
         "mass_balance_error": float(mass_balance_error(fed, in_slag, c.mass_settled, c.mass_lost, c.mass_reacted)),
+        **channel.time_series_columns(sim),
         "coalesced_count": coalesced,
         "uncoalesced_count": n - coalesced,
         "merges": merges,
@@ -358,6 +361,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     sim = Simulation(case, droplets=store, feed=feed)
     sim.initial_mass = sim.mass_in_slag()
     rows = []
+    profile = []  # channel profile rows, one set per snapshot (settler.output.CHANNEL_PROFILE)
     wall_before = 0.0  # wall-clock seconds spent before this process (by the runs this one resumes)
     snaps = SnapshotWriter(out, sim.grid)
     if loaded is not None:
@@ -369,6 +373,9 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
         series = out / "timeseries.csv"
         if series.exists():
             rows = [r for r in read_time_series(series).to_dict("records") if r["time"] <= sim.time + 1e-12]
+        if (out / "channel_profile.csv").exists():
+            profile = [r for r in read_channel_profile(out / "channel_profile.csv").to_dict("records")
+                       if r["time"] <= sim.time + 1e-12]
         snaps.entries = [tuple(e) for e in meta.get("snapshots", [])]
         wall_before = float(meta.get("wall_time", 0.0))
         log(f"resumed from {checkpoint} at t = {sim.time:.6g} s, {sim.store.count} droplets")
@@ -405,6 +412,8 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
         rows.append(time_series_row(sim, wall_time()))
         if fd.snapshot_interval > 0:
             snaps.write(sim.time, sim.store, sim.fluid, np.ones(sim.grid.shape))
+            profile += channel.profile_rows(sim)
+            write_channel_profile(profile, out / "channel_profile.csv")
     good = checkpoint_state(sim)
     if progress:
         log("fulldem: the first step compiles the Numba kernels where no cache exists yet (up to a minute); "
@@ -439,6 +448,8 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
                 if sim.time >= next_snap - 1e-9:
                     _, eps_cells = sim.void_fraction()
                     snaps.write(sim.time, sim.store, sim.fluid, eps_cells)
+                    profile += channel.profile_rows(sim)
+                    write_channel_profile(profile, out / "channel_profile.csv")
                     next_snap += fd.snapshot_interval
                 if signals.caught is not None:
                     write_time_series(time_series_frame(rows), out / "timeseries.csv")

@@ -30,6 +30,8 @@ import numpy as np
 
 from settler.output import atomic_write_bytes, atomic_write_text
 
+from .droplets import MERGED
+
 
 def _mesh_bytes(mesh: meshio.Mesh, compression="zlib") -> bytes:
     """The .vtu file of ``mesh`` as bytes (meshio writes only to files: a temporary one, always removed)."""
@@ -53,7 +55,8 @@ def _droplet_cloud(droplets) -> tuple[meshio.Mesh, str | None]:
     n = droplets.count
     arrays = droplets.arrays()
     point_data = {"diameter": arrays["diameter"], "velocity": arrays["velocity"], "density": arrays["density"],
-                  "age": arrays["age"], "ident": arrays["ident"].astype(np.float64)}
+                  "age": arrays["age"], "ident": arrays["ident"].astype(np.float64),
+                  "merged": ((arrays["flags"] & MERGED) != 0).astype(np.float64)}
     if n:
         return meshio.Mesh(arrays["position"], [("vertex", np.arange(n).reshape(-1, 1))],
                            point_data=point_data), "zlib"

@@ -33,7 +33,8 @@ import numpy as np
 import pandas as pd
 
 from settler.cases import Case
-from settler.output import atomic_write_bytes, time_series_frame, write_run_metadata, write_time_series
+from settler.output import (CHANNEL_PROFILE, MID_BAND, atomic_write_bytes, band_edges, time_series_frame,
+                            write_channel_profile, write_run_metadata, write_time_series)
 
 from . import limits
 from .kernels import (AGE, FES_REMOVED, NEGLIGIBLE_VOLUME_FRACTION, NUMBER, QUANTITIES, cell_properties,
@@ -75,6 +76,7 @@ class Result:
     steps: int
     coalescence_substeps: int = 0
     numbers: list = field(default_factory=list)
+    channel_profile: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=list(CHANNEL_PROFILE)))
 
     def __getattr__(self, name):
         arrays = self.__dict__.get("arrays", {})
@@ -109,10 +111,12 @@ class Result:
                              "settled_mass": settled, "lost_mass": lost, "loss_fraction": fraction})
 
     def save(self, out_dir: str | os.PathLike) -> Path:
-        """Write timeseries.csv, distribution.npz, case.toml and metadata.json into out_dir (atomically)."""
+        """Write timeseries.csv, channel_profile.csv, distribution.npz, case.toml and metadata.json into out_dir
+        (atomically)."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         write_time_series(self.timeseries, out / "timeseries.csv")
+        write_channel_profile(self.channel_profile.to_dict("records"), out / "channel_profile.csv")
         buffer = io.BytesIO()
         np.savez_compressed(buffer, **self.arrays)
         atomic_write_bytes(out / "distribution.npz", buffer.getvalue())
@@ -175,6 +179,42 @@ def _mass(model: Model, amounts: np.ndarray) -> np.ndarray:
     return model.feed_density * model.grid.pivots * amounts[..., NUMBER, :] - amounts[..., FES_REMOVED, :]
 
 
+def _channel(model: Model, content: np.ndarray, work: _Work, cells: np.ndarray):
+    """(channel radius [m], downward slag velocity on the axis [m/s], droplet volume [m^3]) of the given cells, as
+    settler.output defines them for both engines. The zones are uniform: the channel a disk of radius R_c, the outer
+    zone the rest of the cross-section, taken as an annulus out to the radius of a disk of the same area; the
+    half-volume radius follows in closed form. The velocity is the channel zone's plume velocity plus the downflow,
+    averaged over the cells."""
+    if cells.size == 0:
+        return math.nan, math.nan, 0.0
+    d = work.diameters[:, cells, :]
+    per_zone = (content[:, cells, NUMBER, :] * math.pi / 6.0 * d**3).sum(axis=(1, 2)) \
+        * model.zone_area * model.cell_height
+    total = float(per_zone.sum())
+    r_c = model.channel_radius
+    r_out = math.sqrt(float(model.zone_area.sum()) / math.pi)
+    if total <= 0.0:
+        radius = math.nan
+    elif per_zone[CHANNEL] >= 0.5 * total:
+        radius = r_c * math.sqrt(0.5 * total / per_zone[CHANNEL])
+    else:
+        radius = math.sqrt(r_c**2 + (0.5 * total - per_zone[CHANNEL]) / per_zone[OUTER] * (r_out**2 - r_c**2))
+    velocity = float(np.mean(work.collective[CHANNEL, cells] + model.downflow[cells]))
+    return radius, velocity, total
+
+
+def _channel_profile(model: Model, content: np.ndarray, work: _Work, t: float) -> list[dict]:
+    """Rows of settler.output.CHANNEL_PROFILE: the channel measures in PROFILE_BANDS height bands."""
+    edges = band_edges(model.case.geometry.height)
+    rows = []
+    for low, high in zip(edges[:-1], edges[1:]):
+        cells = np.flatnonzero((model.z >= low) & (model.z < high))
+        radius, velocity, volume = _channel(model, content, work, cells)
+        rows.append({"time": t, "z": 0.5 * (low + high), "channel_radius": radius, "channel_velocity": velocity,
+                     "droplet_volume": volume})
+    return rows
+
+
 def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: float):
     """A time-series row and the distribution arrays at time t (properties must be current)."""
     volume = model.zone_area[:, None] * model.cell_height  # (Z, 1) cell volume per zone
@@ -196,6 +236,9 @@ def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: 
     w_mid = number[:, mid, :] * area_in[:, None, None]
     if w_mid.sum() > 0.0:
         row["centreline_settling_velocity"] = (w_mid * work.velocities[:, mid, :]).sum() / w_mid.sum()
+    band = np.flatnonzero(np.abs(model.z - 0.5 * height) <= MID_BAND * height + 1e-12 * height)
+    band = band if band.size else mid  # cells taller than the band: the mid-height cell(s)
+    row["channel_radius"], row["channel_velocity"], _ = _channel(model, content, work, band)
     fed = float(_mass(model, books.fed).sum())
     settled = float(_mass(model, books.settled).sum())
     lost = float(_mass(model, books.lost).sum())
@@ -312,7 +355,7 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
     if progress:
         print(start_up_line, file=stream)
 
-    rows, snapshots = [], []
+    rows, snapshots, profile = [], [], []
     started = wallclock.perf_counter()
     last_report = started
     t, steps, most_substeps = 0.0, 0, 0
@@ -327,6 +370,7 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
             row, arrays = _snapshot(model, content, work, books, t)
             rows.append(row)
             snapshots.append(arrays)
+            profile += _channel_profile(model, content, work, t)
             next_output += 1
         if t >= stop - tiny:
             break
@@ -365,4 +409,5 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
     if progress:
         print(f"popbal {model.name}: done, {steps} steps in {wall:.2f} s", file=stream, flush=True)
     return Result(model=model, timeseries=time_series_frame(rows), arrays=arrays, wall_time=wall, steps=steps,
-                  coalescence_substeps=most_substeps, numbers=numbers)
+                  coalescence_substeps=most_substeps, numbers=numbers,
+                  channel_profile=pd.DataFrame(profile, columns=list(CHANNEL_PROFILE)))

@@ -34,6 +34,10 @@ TIME_SERIES: dict[str, tuple[str, str]] = {
     "mass_lost": ("kg", "matte mass that left through the outlet since t = 0"),
     "mass_reacted": ("kg", "FeS mass removed from droplets by the reaction since t = 0"),
     "mass_balance_error": ("-", "(fed - in slag - settled - lost - reacted) / max(fed, tiny)"),
+    "channel_radius": ("m", "radius around the inlet axis holding half the droplet volume at mid-height (within "
+                            "MID_BAND of the height); the channel's width (NaN if no droplet there)"),
+    "channel_velocity": ("m/s", "downward slag velocity on the inlet axis at mid-height (full engine: the grid flow "
+                                "there; reduced: the channel zone's plume velocity plus the mean downflow)"),
     "coalesced_count": ("-", "droplets in the slag formed by coalescence (seed paper Fig. 15; full engine, NaN in reduced)"),
     "uncoalesced_count": ("-", "droplets in the slag that never coalesced (seed paper Fig. 15; full engine, NaN in "
                                "reduced)"),
@@ -47,10 +51,57 @@ TIME_SERIES: dict[str, tuple[str, str]] = {
                            "(full engine; NaN in reduced): a growing backlog means the feed falls behind"),
 }
 
+#: Half-width of the mid-height band of the channel and centreline columns, as a fraction of the slag height.
+MID_BAND = 0.1
+#: Height bands of the channel profile (``channel_profile.csv``, written at every snapshot by both engines).
+PROFILE_BANDS = 10
+#: Columns of ``channel_profile.csv``: the channel measures of :data:`TIME_SERIES` against height.
+CHANNEL_PROFILE: dict[str, tuple[str, str]] = {
+    "time": ("s", "simulated time of the snapshot"),
+    "z": ("m", "height of the band's centre above the bottom"),
+    "channel_radius": ("m", "radius around the inlet axis holding half the droplet volume in the band (NaN: none)"),
+    "channel_velocity": ("m/s", "downward slag velocity on the inlet axis at the band's centre"),
+    "droplet_volume": ("m^3", "droplet volume in the band"),
+}
+
+
+def half_volume_radius(radius, volume) -> float:
+    """The radius [m] around an axis that holds half the volume of droplets at distances ``radius`` [m] from it with
+    volumes ``volume`` [m^3]: their volume-weighted median distance, interpolated between droplets (each counted
+    at half its volume at its own distance). NaN for no droplets."""
+    r = np.asarray(radius, dtype=float).ravel()
+    v = np.asarray(volume, dtype=float).ravel()
+    total = float(v.sum()) if v.size else 0.0
+    if total <= 0.0:
+        return float("nan")
+    order = np.argsort(r, kind="stable")
+    r, v = r[order], v[order]
+    below = np.cumsum(v) - 0.5 * v
+    return float(np.interp(0.5 * total, below, r))
+
+
+def band_edges(height: float, bands: int = PROFILE_BANDS) -> np.ndarray:
+    """Edges [m] of ``bands`` equal height bands from the bottom (0) to the top (``height``)."""
+    return np.linspace(0.0, float(height), int(bands) + 1)
+
+
+def write_channel_profile(rows: list[dict], path) -> None:
+    """Write the channel profile rows (keys of :data:`CHANNEL_PROFILE`) atomically as CSV with a units line."""
+    frame = pd.DataFrame(rows, columns=list(CHANNEL_PROFILE)).astype(float)
+    units = "# units: " + ", ".join(f"{k} [{u}]" for k, (u, _) in CHANNEL_PROFILE.items()) + "\n"
+    atomic_write_text(path, units + frame.to_csv(index=False))
+
+
+def read_channel_profile(path) -> pd.DataFrame:
+    """The rows of a ``channel_profile.csv``."""
+    return pd.read_csv(path, comment="#")
+
+
 #: Files a run of either engine writes into its output folder (plus the numbered snapshots of SNAPSHOT_PATTERNS):
 #: a folder holding any of them holds a run.
 RUN_FILES = ("case.toml", "metadata.json", "timeseries.csv", "timeseries.png", "summary.json", "checkpoint.npz",
-             "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz", "merges_by_size.csv")
+             "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz", "merges_by_size.csv",
+             "channel_profile.csv")
 SNAPSHOT_PATTERNS = ("droplets_*.vtu", "fluid_*.vtu")
 
 
