@@ -44,10 +44,12 @@ Records. The kernels take the droplets' ``position`` and ``velocity`` (cap, 3) a
 One contact-row body (:func:`_row`) serves the full list (each droplet sums its own row) and the half list (each pair
 once, the reaction subtracted from the partner).
 
-Records are read-only inside parallel loops: numba (0.6x) loses writes made through a record's array field inside a
-``prange`` loop (written values vanish, no error). A kernel that writes an array of a record (``Motion.impulse``,
-``Contacts.approach``) takes an alias of it *before* its parallel loop and passes that alias on
-(tests/test_fulldem_dem.py checks every written array).
+Records are unpacked at the top of each kernel, before its parallel loops, and the inline helpers (:func:`_row`,
+:func:`_kick_drift`, ...) take plain arrays and numbers. Two reasons, both measured with numba 0.68: writes made
+through a record's array field inside a ``prange`` loop are lost (the values vanish, no error; the impulse of the
+integrator test was zero), and kernels whose helpers read the records' fields inside the loops ran 20-33 % slower
+(bench_dem, 130 000 droplets, one thread: 2.5e7 against 3.7e7 particle-steps/s) for reasons the inlined IR does
+not show.
 """
 
 from __future__ import annotations
@@ -124,8 +126,8 @@ class Walls(NamedTuple):
     ``on``: some plane exists; ``lower``/``upper`` (3,) [m]: the planes' positions, -inf/+inf where there is none
     (periodic axis, absorbing bottom); outlet hole of radius ``outlet_radius`` [m] in side wall ``outlet_side``
     (0..3: x-, x+, y-, y+; -1: none) centred at height ``outlet_height`` [m] and transverse coordinate
-    ``outlet_transverse`` [m] (y on x walls, x on y walls); the wall law is the pair law (``law``, ``stiffness_ref``
-    [N/m] at ``diameter_ref`` [m]) with m_eff = m and damping ratio ``zeta`` [-].
+    ``outlet_transverse`` [m] (y on x walls, x on y walls); the wall law is the pair law (the contact law and
+    stiffness of the kernel's :class:`Contacts`) with m_eff = m and damping ratio ``zeta`` [-].
     """
 
     on: bool
@@ -135,10 +137,7 @@ class Walls(NamedTuple):
     outlet_height: float
     outlet_transverse: float
     outlet_radius: float
-    stiffness_ref: float
-    diameter_ref: float
     zeta: float
-    law: int
 
 
 class Motion(NamedTuple):
@@ -168,14 +167,13 @@ def contacts_record(neighbours, damping, stiffness_ref, diameter_ref, law, appro
                     approach, float(h))
 
 
-def walls_record(box_lower, box_upper, periodic, absorbing_bottom, outlet, stiffness_ref, diameter_ref, zeta,
-                 law) -> Walls:
+def walls_record(box_lower, box_upper, periodic, absorbing_bottom, outlet, zeta) -> Walls:
     """A :class:`Walls` for a box [m] with ``periodic`` (3,) bool axes, an optionally absorbing bottom and ``outlet``
     (side, height, transverse, radius) or None."""
     lower, upper = wall_planes(box_lower, box_upper, periodic, absorbing_bottom)
     side, height, transverse, radius = outlet if outlet is not None else (-1, 0.0, 0.0, 0.0)
     return Walls(not bool(np.all(periodic)), lower, upper, int(side), float(height), float(transverse),
-                 float(radius), float(stiffness_ref), float(diameter_ref), float(zeta), int(law))
+                 float(radius), float(zeta))
 
 
 def wall_planes(box_lower, box_upper, periodic, absorbing_bottom):
@@ -225,27 +223,28 @@ def _mutual_partner(p, flags, partner):
 
 
 @njit(cache=True, inline="always")
-def _separation(position, j, xi, yi, zi, c):
-    """x_j - x_i (minimum image on periodic axes of :class:`Contacts` c) and its squared length [m], [m^2].
+def _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period):
+    """x_j - x_i (minimum image on periodic axes) and its squared length [m], [m^2].
 
-    ``c.periodic_any`` is loop-invariant: a box without periodic axes skips the image arithmetic (10-20 % of a
+    ``periodic_any`` is loop-invariant: a box without periodic axes skips the image arithmetic (10-20 % of a
     contact kernel) at the cost of one well-predicted branch.
     """
     dx = position[j, 0] - xi
     dy = position[j, 1] - yi
     dz = position[j, 2] - zi
-    if c.periodic_any:
-        dx -= c.period[0] * np.rint(dx * c.inverse_period[0])
-        dy -= c.period[1] * np.rint(dy * c.inverse_period[1])
-        dz -= c.period[2] * np.rint(dz * c.inverse_period[2])
+    if periodic_any:
+        dx -= period[0] * np.rint(dx * inverse_period[0])
+        dy -= period[1] * np.rint(dy * inverse_period[1])
+        dz -= period[2] * np.rint(dz * inverse_period[2])
     return dx, dy, dz, dx * dx + dy * dy + dz * dz
 
 
 @njit(cache=True, inline="always")
-def _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi, di, damping, c):
+def _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi, di, stiffness_ref, diameter_ref, damping,
+                law, periodic_any, period, inverse_period):
     """Force of a touching droplet j on droplet i with dashpot ``damping`` [N s/m]: (fx, fy, fz, overlap, smaller
     diameter, normal relative velocity vn) [N], [m], [m/s] (vn < 0: approaching)."""
-    dx, dy, dz, r2 = _separation(position, j, xi, yi, zi, c)
+    dx, dy, dz, r2 = _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period)
     dj = diameter[j]
     dist = math.sqrt(r2)
     inv = 1.0 / dist
@@ -253,8 +252,8 @@ def _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi, di, dam
     vn = (velocity[j, 0] - ui) * nx + (velocity[j, 1] - vi) * ny + (velocity[j, 2] - wi) * nz
     small = min(di, dj)
     overlap = 0.5 * (di + dj) - dist
-    k = contacts.pair_stiffness(c.stiffness_ref, c.diameter_ref, small)
-    f = contacts.normal_force(c.law, overlap, vn, k, damping)
+    k = contacts.pair_stiffness(stiffness_ref, diameter_ref, small)
+    f = contacts.normal_force(law, overlap, vn, k, damping)
     return -f * nx, -f * ny, -f * nz, overlap, small, vn
 
 
@@ -278,43 +277,47 @@ def pair_damping(start, index, diameter, mass, count, stiffness_ref, diameter_re
 
 
 @njit(cache=True, inline="always")
-def _in_outlet(p, position, side, w):
-    """True if droplet p's centre faces the outlet hole of :class:`Walls` w in wall ``side`` (no force there)."""
-    if side != w.outlet_side:
+def _in_outlet(p, position, side, outlet_side, outlet_height, outlet_transverse, outlet_radius):
+    """True if droplet p's centre faces the outlet hole in wall ``side`` (that wall then exerts no force)."""
+    if side != outlet_side:
         return False
     transverse = position[p, 1] if side < Y_LOW else position[p, 0]
-    dz = position[p, 2] - w.outlet_height
-    dt = transverse - w.outlet_transverse
-    return dz * dz + dt * dt < w.outlet_radius * w.outlet_radius
+    dz = position[p, 2] - outlet_height
+    dt = transverse - outlet_transverse
+    return dz * dz + dt * dt < outlet_radius * outlet_radius
 
 
 @njit(cache=True, inline="always")
-def _wall_force(p, position, velocity, diameter, mass, w):
-    """Force of the box's planes (:class:`Walls` w) on droplet p: (fx, fy, fz, largest overlap ratio) [N], [-].
+def _wall_force(p, position, velocity, diameter, mass, wall_lower, wall_upper, outlet_side, outlet_height,
+                outlet_transverse, outlet_radius, stiffness_ref, diameter_ref, zeta, law):
+    """Force of the box's planes on droplet p: (fx, fy, fz, largest overlap ratio) [N], [-] (the fields of
+    :class:`Walls`, unpacked).
 
     Planes at -inf/+inf where there is none, so the common case -- touching no wall -- costs six comparisons.
     """
     radius = 0.5 * diameter[p]
     x, y, z = position[p, 0], position[p, 1], position[p, 2]
-    if (x - w.lower[0] >= radius) & (w.upper[0] - x >= radius) & (y - w.lower[1] >= radius) \
-            & (w.upper[1] - y >= radius) & (z - w.lower[2] >= radius) & (w.upper[2] - z >= radius):
+    if (x - wall_lower[0] >= radius) & (wall_upper[0] - x >= radius) & (y - wall_lower[1] >= radius) \
+            & (wall_upper[1] - y >= radius) & (z - wall_lower[2] >= radius) & (wall_upper[2] - z >= radius):
         return 0.0, 0.0, 0.0, 0.0
-    k = contacts.pair_stiffness(w.stiffness_ref, w.diameter_ref, diameter[p])
-    gamma = contacts.damping_coefficient(k, mass[p], w.zeta)
+    k = contacts.pair_stiffness(stiffness_ref, diameter_ref, diameter[p])
+    gamma = contacts.damping_coefficient(k, mass[p], zeta)
     worst = 0.0
     f0 = 0.0
     f1 = 0.0
     f2 = 0.0
     for a in range(3):
-        low = radius - (position[p, a] - w.lower[a])
-        high = radius - (w.upper[a] - position[p, a])
+        low = radius - (position[p, a] - wall_lower[a])
+        high = radius - (wall_upper[a] - position[p, a])
         f = 0.0
         # lower plane: the droplet separates from it moving along +a
-        if low > 0.0 and not _in_outlet(p, position, 2 * a, w):
-            f += contacts.normal_force(w.law, low, velocity[p, a], k, gamma)
+        if low > 0.0 and not _in_outlet(p, position, 2 * a, outlet_side, outlet_height, outlet_transverse,
+                                        outlet_radius):
+            f += contacts.normal_force(law, low, velocity[p, a], k, gamma)
             worst = max(worst, low / diameter[p])
-        if high > 0.0 and not _in_outlet(p, position, 2 * a + 1, w):
-            f -= contacts.normal_force(w.law, high, -velocity[p, a], k, gamma)
+        if high > 0.0 and not _in_outlet(p, position, 2 * a + 1, outlet_side, outlet_height, outlet_transverse,
+                                         outlet_radius):
+            f -= contacts.normal_force(law, high, -velocity[p, a], k, gamma)
             worst = max(worst, high / diameter[p])
         if a == 0:
             f0 = f
@@ -327,16 +330,17 @@ def _wall_force(p, position, velocity, diameter, mass, w):
 
 # ---------------------------------------------------------------------------------------------------- contact rows
 @njit(cache=True, inline="always")
-def _touching_entries(i, position, diameter, flags, partner, c, touching):
+def _touching_entries(i, position, diameter, flags, partner, start, index, periodic_any, period, inverse_period,
+                      touching):
     """Write into ``touching`` the list entries k of row i whose partner overlaps droplet i (not its mutual
     coalescence partner), without a branch per entry; returns how many."""
     xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
     di = diameter[i]
     skip = _mutual_partner(i, flags, partner)
     found = 0
-    for k in range(c.start[i], c.start[i + 1]):
-        j = c.index[k]
-        r2 = _separation(position, j, xi, yi, zi, c)[3]
+    for k in range(start[i], start[i + 1]):
+        j = index[k]
+        r2 = _separation(position, j, xi, yi, zi, periodic_any, period, inverse_period)[3]
         reach = 0.5 * (di + diameter[j])
         touching[found] = k
         found += (r2 < reach * reach) & (r2 > 0.0) & (j != skip)
@@ -344,32 +348,37 @@ def _touching_entries(i, position, diameter, flags, partner, c, touching):
 
 
 @njit(cache=True, inline="always")
-def _row(i, position, velocity, b, c, w, approach, touching, force, half):
-    """The one contact-row body: force on droplet i from row i of the list and from the walls (if ``w.on``):
-    (fx, fy, fz, largest overlap ratio) [N], [-].
+def _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping, periodic_any, period,
+         inverse_period, stiffness_ref, diameter_ref, law, approach, h, walls, wall_lower, wall_upper, outlet_side,
+         outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching, force, half, worst):
+    """The one contact-row body: force on droplet i from row i of the list and from the walls (if ``walls``):
+    (fx, fy, fz, the larger of ``worst`` and the row's largest overlap ratio) [N], [-] (a running maximum: the
+    ratio's division happens only for a new maximum). The arguments are the fields of :class:`Bodies`, :class:`Contacts`
+    and :class:`Walls`, unpacked by the calling kernel (see the module docstring, *Records*); the walls take the
+    pair law. (At most 30 arguments: Python 3.11 passes more as a tuple, which numba cannot inline.)
 
     The row is first filtered into the entries of touching partners (``touching``: a work row, filled without a
     branch per entry), then only their forces are computed, with the entries' dashpot coefficients. With ``half``
     (a half list: each pair in one row only) each pair force is also subtracted from ``force[j]`` of the partner;
     with a full list ``force`` is not touched (the caller stores or uses the returned force). First contacts are
-    written to ``approach`` (the kernel's alias of ``c.approach``, see :class:`Contacts`) when it has entries.
+    written to ``approach`` when it has entries (see :class:`Contacts`).
     """
     xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
-    diameter, flags = b.diameter, b.flags
     di = diameter[i]
-    found = _touching_entries(i, position, diameter, flags, b.partner, c, touching)
-    record = approach.shape[0] > 0
+    found = _touching_entries(i, position, diameter, flags, partner, start, index, periodic_any, period,
+                              inverse_period, touching)
     fx = 0.0
     fy = 0.0
     fz = 0.0
-    worst = 0.0
     if found:
+        record = approach.shape[0] > 0
         ui, vi, wi = velocity[i, 0], velocity[i, 1], velocity[i, 2]
         for q in range(found):
             k = touching[q]
-            j = c.index[k]
+            j = index[k]
             gx, gy, gz, overlap, small, vn = _pair_force(position, velocity, diameter, j, xi, yi, zi, ui, vi, wi,
-                                                         di, c.damping[k], c)
+                                                         di, stiffness_ref, diameter_ref, damping[k], law,
+                                                         periodic_any, period, inverse_period)
             fx += gx
             fy += gy
             fz += gz
@@ -379,10 +388,12 @@ def _row(i, position, velocity, b, c, w, approach, touching, force, half):
                 force[j, 2] -= gz
             if overlap > worst * small:  # the largest ratio without a division per contact
                 worst = overlap / small
-            if record and overlap < -vn * c.h and ((flags[i] | flags[j]) & COALESCING) == 0:
+            if record and overlap < -vn * h and ((flags[i] | flags[j]) & COALESCING) == 0:
                 approach[k] = -vn
-    if w.on:
-        gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, b.mass, w)
+    if walls:
+        gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, mass, wall_lower, wall_upper, outlet_side,
+                                        outlet_height, outlet_transverse, outlet_radius, stiffness_ref, diameter_ref,
+                                        wall_zeta, law)
         fx += gx
         fy += gy
         fz += gz
@@ -398,28 +409,36 @@ def contact_forces_full(position, velocity, b, count, c, w, nchunk, candidates, 
     :class:`Contacts`, ``w`` :class:`Walls`; ``candidates`` (nchunk, longest row) int32: work rows. Returns the
     largest overlap ratio (overlap / smaller diameter) [-]. Mutual coalescence partners exert no force on each other.
     """
-    approach = c.approach  # written: an alias taken before the parallel loop (see the module docstring)
+    diameter, mass, flags, partner = b
+    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, h = c
+    walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
     worst = np.zeros(nchunk)
     for ch in prange(nchunk):
         local = 0.0
         for i in range(ch * count // nchunk, (ch + 1) * count // nchunk):
-            fx, fy, fz, ratio = _row(i, position, velocity, b, c, w, approach, candidates[ch], force, False)
+            fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
+                                     periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law,
+                                     approach, h, walls, wall_lower, wall_upper, side, height, transverse, radius,
+                                     wall_zeta, candidates[ch], force, False, local)
             force[i, 0] = fx
             force[i, 1] = fy
             force[i, 2] = fz
-            local = max(local, ratio)
         worst[ch] = local
     return worst.max()
 
 
 @njit(cache=True, inline="always")
-def _slab_rows(s, nslab, position, velocity, b, count, c, w, approach, touching, force):
-    """Add the forces of the half-list rows of slab s (each pair to both droplets, and the walls') to ``force``;
-    returns the largest overlap ratio."""
+def _slab_rows(lo, hi, position, velocity, diameter, mass, flags, partner, start, index, damping, periodic_any,
+               period, inverse_period, stiffness_ref, diameter_ref, law, approach, h, walls, wall_lower, wall_upper,
+               outlet_side, outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching, force):
+    """Add the forces of the half-list rows lo..hi-1 (a slab: each pair to both droplets, and the walls') to
+    ``force``; returns the largest overlap ratio."""
     local = 0.0
-    for i in range(s * count // nslab, (s + 1) * count // nslab):
-        fx, fy, fz, ratio = _row(i, position, velocity, b, c, w, approach, touching, force, True)
-        local = max(local, ratio)
+    for i in range(lo, hi):
+        fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
+                                 periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law, approach, h,
+                                 walls, wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse,
+                                 outlet_radius, wall_zeta, touching, force, True, local)
         force[i, 0] += fx
         force[i, 1] += fy
         force[i, 2] += fz
@@ -457,29 +476,37 @@ def contact_forces_half(position, velocity, b, count, c, w, nslab, candidates, f
             force[i, 0] = 0.0
             force[i, 1] = 0.0
             force[i, 2] = 0.0
-    approach = c.approach
+    diameter, mass, flags, partner = b
+    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, h = c
+    walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
     worst = np.zeros(nslab)
     for phase in range(2):
         for q in prange((nslab - phase + 1) // 2):
             s = 2 * q + phase
-            worst[s] = _slab_rows(s, nslab, position, velocity, b, count, c, w, approach, candidates[s], force)
+            worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass,
+                                  flags, partner, start, index, damping, periodic_any, period, inverse_period,
+                                  stiffness_ref, diameter_ref, law, approach, h, walls, wall_lower, wall_upper, side,
+                                  height, transverse, radius, wall_zeta, candidates[s], force)
     return worst.max()
 
 
 # ---------------------------------------------------------------------------------------------------- walls
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def wall_forces(position, velocity, diameter, mass, count, w, nchunk, force):
+def wall_forces(position, velocity, diameter, mass, count, w, stiffness_ref, diameter_ref, law, nchunk, force):
     """Add the contact force of the box's planes (:class:`Walls` w) to ``force`` [N]; returns the largest ratio [-].
 
-    The wall law is the pair law with m_eff = m and the stiffness of the droplet's own diameter. An absorbing
+    The wall law is the pair law (``law``, ``stiffness_ref`` [N/m] at ``diameter_ref`` [m]) with m_eff = m and the
+    stiffness of the droplet's own diameter. An absorbing
     bottom exerts nothing (the caller removes droplets there); droplets whose centre faces the outlet hole pass.
     (The contact kernels apply the same walls in their own loop.)
     """
+    _, wall_lower, wall_upper, side, height, transverse, radius, zeta = w
     worst = np.zeros(nchunk)
     for ch in prange(nchunk):
         local = 0.0
         for p in range(ch * count // nchunk, (ch + 1) * count // nchunk):
-            fx, fy, fz, ratio = _wall_force(p, position, velocity, diameter, mass, w)
+            fx, fy, fz, ratio = _wall_force(p, position, velocity, diameter, mass, wall_lower, wall_upper, side,
+                                            height, transverse, radius, stiffness_ref, diameter_ref, zeta, law)
             force[p, 0] += fx
             force[p, 1] += fy
             force[p, 2] += fz
@@ -511,7 +538,7 @@ def integrate_initial(position, velocity, force, mass, m, count, nchunk):
     module docstring). Returns the largest displacement of a droplet in this step [m] (the neighbour list's cheap
     validity bound). Next: forces at the new positions, then :func:`integrate_final` with the same ``m``.
     """
-    fluid_velocity, body_acceleration, h, impulse = m.fluid_velocity, m.body_acceleration, m.h, m.impulse
+    drag, fluid_velocity, body_acceleration, h, impulse = m
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     half_h = 0.5 * h
@@ -521,7 +548,7 @@ def integrate_initial(position, velocity, force, mass, m, count, nchunk):
         for p in range(ch * count // nchunk, (ch + 1) * count // nchunk):
             mp = mass[p]
             inv_m = 1.0 / mp
-            e, phi1, phi2 = m.drag[p, 0], m.drag[p, 1], m.drag[p, 2]
+            e, phi1, phi2 = drag[p, 0], drag[p, 1], drag[p, 2]
             kick = phi1 - phi2 / h
             moved = 0.0
             for a in range(3):
@@ -542,13 +569,13 @@ def integrate_initial(position, velocity, force, mass, m, count, nchunk):
 
 
 @njit(cache=True, inline="always")
-def _kick(p, velocity, force, mass, m, impulse, track, half_h):
+def _kick(p, velocity, force, mass, drag, body_acceleration, h, impulse, track, half_h):
     """Second half of droplet p's step: add the end-of-step force's share to its velocity; complete its impulse."""
     mp = mass[p]
     inv_m = 1.0 / mp
-    kick_end = m.drag[p, 2] / m.h
+    kick_end = drag[p, 2] / h
     for a in range(3):
-        acc = force[p, a] * inv_m + m.body_acceleration[a]
+        acc = force[p, a] * inv_m + body_acceleration[a]
         velocity[p, a] += acc * kick_end
         if track:
             impulse[p, a] += mp * velocity[p, a] - mp * acc * half_h
@@ -560,21 +587,21 @@ def integrate_final(velocity, force, mass, m, count):
 
     force (cap, 3) [N] at the new positions (and the partly updated velocities, as in velocity Verlet).
     """
-    impulse = m.impulse
+    drag, _, body_acceleration, h, impulse = m
     track = impulse.shape[0] > 0
-    half_h = 0.5 * m.h
+    half_h = 0.5 * h
     for p in prange(count):
-        _kick(p, velocity, force, mass, m, impulse, track, half_h)
+        _kick(p, velocity, force, mass, drag, body_acceleration, h, impulse, track, half_h)
 
 
 @njit(cache=True, inline="always")
-def _kick_drift(p, position, velocity, fx, fy, fz, mass, m, impulse, stride, track, position_out, velocity_out):
+def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride, body_acceleration, h, track,
+                impulse, position_out, velocity_out):
     """Finish droplet p's step with force (fx, fy, fz) and start the next one, writing the new state to the ``_out``
     arrays (which may be the inputs). Returns the squared displacement [m^2]."""
-    h, body_acceleration = m.h, m.body_acceleration
     mp = mass[p]
     inv_m = 1.0 / mp
-    e, phi1, phi2 = m.drag[p, 0], m.drag[p, 1], m.drag[p, 2]
+    e, phi1, phi2 = drag[p, 0], drag[p, 1], drag[p, 2]
     kick_end = phi2 / h
     kick_start = phi1 - kick_end
     moved = 0.0
@@ -582,7 +609,7 @@ def _kick_drift(p, position, velocity, fx, fy, fz, mass, m, impulse, stride, tra
         f = fx if a == 0 else (fy if a == 1 else fz)
         acc = f * inv_m + body_acceleration[a]
         v = velocity[p, a] + acc * kick_end
-        u = m.fluid_velocity[p * stride, a]
+        u = fluid_velocity[p * stride, a]
         w = v - u
         step = u * h + w * phi1 + acc * phi2
         position_out[p, a] = position[p, a] + step
@@ -606,15 +633,15 @@ def integrate_kick_drift(position, velocity, force, mass, m, count, nchunk):
     Both use the same force (computed at the positions between the two steps), so this is exactly the two calls in
     a row, with one memory pass and one parallel launch instead of two. Returns the step's largest displacement [m].
     """
-    stride = 1 if m.fluid_velocity.shape[0] > 1 else 0
-    impulse = m.impulse
+    drag, fluid_velocity, body_acceleration, h, impulse = m
+    stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     worst = np.zeros(nchunk)
     for ch in prange(nchunk):
         local = 0.0
         for p in range(ch * count // nchunk, (ch + 1) * count // nchunk):
-            moved = _kick_drift(p, position, velocity, force[p, 0], force[p, 1], force[p, 2], mass, m, impulse,
-                                stride, track, position, velocity)
+            moved = _kick_drift(p, position, velocity, force[p, 0], force[p, 1], force[p, 2], mass, drag,
+                                fluid_velocity, stride, body_acceleration, h, track, impulse, position, velocity)
             local = max(local, moved)
         worst[ch] = local
     return math.sqrt(worst.max())
@@ -629,8 +656,11 @@ def step_fused(position, velocity, position_next, velocity_next, b, count, c, w,
     neighbours' force computation, so the force array and a second pass over the droplets are not needed. Returns
     (largest overlap ratio [-], largest displacement [m]).
     """
-    stride = 1 if m.fluid_velocity.shape[0] > 1 else 0
-    impulse, approach = m.impulse, c.approach
+    diameter, mass, flags, partner = b
+    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _ = c
+    walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
+    drag, fluid_velocity, body_acceleration, h, impulse = m  # (the contact record's h is the same step)
+    stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     worst = np.zeros(nchunk)
     travel = np.zeros(nchunk)
@@ -639,32 +669,35 @@ def step_fused(position, velocity, position_next, velocity_next, b, count, c, w,
         local = 0.0
         moved = 0.0
         for i in range(ch * count // nchunk, (ch + 1) * count // nchunk):
-            fx, fy, fz, ratio = _row(i, position, velocity, b, c, w, approach, candidates[ch], no_force, False)
-            local = max(local, ratio)
-            moved = max(moved, _kick_drift(i, position, velocity, fx, fy, fz, b.mass, m, impulse, stride, track,
-                                           position_next, velocity_next))
+            fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
+                                     periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law,
+                                     approach, h, walls, wall_lower, wall_upper, side, height, transverse, radius,
+                                     wall_zeta, candidates[ch], no_force, False, local)
+            moved = max(moved, _kick_drift(i, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride,
+                                           body_acceleration, h, track, impulse, position_next, velocity_next))
         worst[ch] = local
         travel[ch] = moved
     return worst.max(), math.sqrt(travel.max())
 
 
 @njit(cache=True, inline="always")
-def _slab_kick(s, nslab, count, position, velocity, force, mass, m, impulse, stride, track, drift):
+def _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride, body_acceleration, h,
+               track, impulse, drift):
     """Finish the step of slab s's droplets with their force; with ``drift`` also start the next step and zero the
     force for the next accumulation. Returns the largest squared displacement [m^2]."""
     moved = 0.0
-    half_h = 0.5 * m.h
+    half_h = 0.5 * h
     for p in range(s * count // nslab, (s + 1) * count // nslab):
         if drift:
             fx, fy, fz = force[p, 0], force[p, 1], force[p, 2]
-            moved = max(moved, _kick_drift(p, position, velocity, fx, fy, fz, mass, m, impulse, stride, track,
-                                           position, velocity))
+            moved = max(moved, _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride,
+                                           body_acceleration, h, track, impulse, position, velocity))
             if (fx != 0.0) | (fy != 0.0) | (fz != 0.0):  # most rows are zero already: no write, no dirty line
                 force[p, 0] = 0.0
                 force[p, 1] = 0.0
                 force[p, 2] = 0.0
         else:
-            _kick(p, velocity, force, mass, m, impulse, track, half_h)
+            _kick(p, velocity, force, mass, drag, body_acceleration, h, impulse, track, half_h)
     return moved
 
 
@@ -680,25 +713,35 @@ def step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, e
     parities only finish the step (no drift) and ``force`` keeps the forces at the final positions. Same
     partitioning rules as :func:`contact_forces_half`. Returns (largest overlap ratio [-], largest displacement [m]).
     """
-    stride = 1 if m.fluid_velocity.shape[0] > 1 else 0
-    impulse, approach = m.impulse, c.approach
+    diameter, mass, flags, partner = b
+    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _ = c
+    walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
+    drag, fluid_velocity, body_acceleration, h, impulse = m
+    stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
-    mass = b.mass
     worst = np.zeros(nslab)
     travel = np.zeros(nslab)
     for q in prange((nslab + 1) // 2):
         s = 2 * q
         if even_pending:
-            travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, m, impulse, stride, track, True)
-        worst[s] = _slab_rows(s, nslab, position, velocity, b, count, c, w, approach, candidates[s], force)
+            travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
+                                   body_acceleration, h, track, impulse, True)
+        worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass, flags,
+                              partner, start, index, damping, periodic_any, period, inverse_period, stiffness_ref,
+                              diameter_ref, law, approach, h, walls, wall_lower, wall_upper, side, height,
+                              transverse, radius, wall_zeta, candidates[s], force)
     for q in prange(nslab // 2):
         s = 2 * q + 1
-        worst[s] = _slab_rows(s, nslab, position, velocity, b, count, c, w, approach, candidates[s], force)
-        travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, m, impulse, stride, track,
-                               not last)
+        worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass, flags,
+                              partner, start, index, damping, periodic_any, period, inverse_period, stiffness_ref,
+                              diameter_ref, law, approach, h, walls, wall_lower, wall_upper, side, height,
+                              transverse, radius, wall_zeta, candidates[s], force)
+        travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
+                               body_acceleration, h, track, impulse, not last)
     if last:
         for q in prange((nslab + 1) // 2):
-            _slab_kick(2 * q, nslab, count, position, velocity, force, mass, m, impulse, stride, track, False)
+            _slab_kick(2 * q, nslab, count, position, velocity, force, mass, drag, fluid_velocity, stride,
+                       body_acceleration, h, track, impulse, False)
     return worst.max(), math.sqrt(travel.max())
 
 
@@ -733,13 +776,13 @@ def step_half_many(steps, travel_bound, half_skin, lower, position, velocity, b,
 def finish_even_slabs(position, velocity, force, mass, m, count, nslab):
     """Kick-drift the pending even slabs of :func:`step_half` (all droplets then at the same time level, forces
     zero), e.g. before a neighbour-list rebuild. Returns the largest displacement [m]."""
-    stride = 1 if m.fluid_velocity.shape[0] > 1 else 0
-    impulse = m.impulse
+    drag, fluid_velocity, body_acceleration, h, impulse = m
+    stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     travel = np.zeros(nslab)
     for q in prange((nslab + 1) // 2):
-        travel[2 * q] = _slab_kick(2 * q, nslab, count, position, velocity, force, mass, m, impulse, stride, track,
-                                   True)
+        travel[2 * q] = _slab_kick(2 * q, nslab, count, position, velocity, force, mass, drag, fluid_velocity,
+                                   stride, body_acceleration, h, track, impulse, True)
     return math.sqrt(travel.max())
 
 
@@ -842,7 +885,7 @@ class DemStepper:
             raise ValueError(f"dem: outlet side {side} must be 0..3 (x-, x+, y-, y+) or -1 (none)")
         self.outlet = (int(side), float(height), float(transverse), float(radius))
         self.walls = walls_record(self.lower, self.upper, self.periodic, self.absorbing_bottom, self.outlet,
-                                  self.stiffness_ref, self.diameter_ref, self.wall_zeta, self.law)
+                                  self.wall_zeta)
         self.record_first_contacts = bool(record_first_contacts)
         self.approach = np.zeros(0)  # the list entries' first-contact record (Contacts.approach), when recording
         self._first_contacts = []  # (ident a, ident b, approach speed) arrays read from the record since the last take

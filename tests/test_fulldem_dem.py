@@ -210,7 +210,7 @@ def test_reorder_store_keeps_droplets_and_partners():
 
 
 # ------------------------------------------------------------------------------------------------ kernels vs twins
-NO_WALLS = dem.walls_record(np.zeros(3), np.ones(3), (True, True, True), False, None, 1.0, 1.0, 0.0, 0)
+NO_WALLS = dem.walls_record(np.zeros(3), np.ones(3), (True, True, True), False, None, 0.0)
 
 
 def _bodies(store, mass):
@@ -351,7 +351,7 @@ def test_wall_kernel_matches_numpy_twin(absorbing_bottom):
     force = rng.normal(0, 1e-6, (n, 3))
     before = force.copy()
     worst = dem.wall_forces(pos, vel, d, mass, n, dem.walls_record(box_lower, box_upper, periodic, absorbing_bottom,
-                                                                   outlet, 2.0, 0.5e-3, 0.3, 0), 4, force)
+                                                                   outlet, 0.3), 2.0, 0.5e-3, 0, 4, force)
     ref, ref_worst = reference.wall_forces_reference(pos, vel, d, mass, n, box_lower, box_upper, periodic,
                                                absorbing_bottom, *outlet, 2.0, 0.5e-3, 0.3, 0)
     np.testing.assert_allclose(force - before, ref, rtol=1e-12, atol=1e-20)
@@ -377,12 +377,13 @@ def test_full_list_kernel_applies_the_same_walls():
     geometry = (np.zeros(3), box, periodic, False, 0, 0.6e-3, 0.7e-3, 0.5e-3)
     fused = np.zeros((n, 3))
     planes = dem.wall_planes(np.zeros(3), box, periodic, False)
-    walls = dem.walls_record(*geometry[:4], geometry[4:], 3.0, 0.5e-3, 0.35, 0)
+    walls = dem.walls_record(*geometry[:4], geometry[4:], 0.35)
     assert np.array_equal(walls.lower, planes[0]) and np.array_equal(walls.upper, planes[1])
     worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, fused, walls=walls)
     apart = np.zeros((n, 3))
     worst_pairs = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, apart)
-    worst_walls = dem.wall_forces(store.position, store.velocity, store.diameter, mass, n, walls, 2, apart)
+    worst_walls = dem.wall_forces(store.position, store.velocity, store.diameter, mass, n, walls, 3.0, 0.5e-3, 0, 2,
+                                  apart)
     np.testing.assert_allclose(fused, apart, rtol=1e-13, atol=1e-14 * np.abs(apart).max())
     assert worst == max(worst_pairs, worst_walls) and worst_walls > 0.0
 
