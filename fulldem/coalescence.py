@@ -137,14 +137,18 @@ class Coalescence(Submodel):
         a, b, speed = sim.dem.take_first_contacts()
         if a.size == 0 or n == 0:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        # idents -> current indices (a droplet merged or gone since is dropped)
-        ident = s.ident[:n]
-        order = np.argsort(ident, kind="stable")
+        # idents -> current indices (a droplet merged or gone since is dropped); one pass over the store, sorting
+        # only the few droplets involved
+        where = np.flatnonzero(np.isin(s.ident[:n], np.concatenate([a, b])))
+        order = np.argsort(s.ident[where], kind="stable")
+        known, index = s.ident[where][order], where[order]
         lo, hi = np.minimum(a, b), np.maximum(a, b)
-        pos_lo = np.minimum(np.searchsorted(ident[order], lo), n - 1)
-        pos_hi = np.minimum(np.searchsorted(ident[order], hi), n - 1)
-        alive = (ident[order][pos_lo] == lo) & (ident[order][pos_hi] == hi)
-        i, j, lo, hi, speed = order[pos_lo][alive], order[pos_hi][alive], lo[alive], hi[alive], speed[alive]
+        if known.size == 0:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        pos_lo = np.minimum(np.searchsorted(known, lo), known.size - 1)
+        pos_hi = np.minimum(np.searchsorted(known, hi), known.size - 1)
+        alive = (known[pos_lo] == lo) & (known[pos_hi] == hi)
+        i, j, lo, hi, speed = index[pos_lo][alive], index[pos_hi][alive], lo[alive], hi[alive], speed[alive]
         # one record per pair (the first read), in the order of (lower ident, higher ident)
         pair_order = np.lexsort((hi, lo))
         i, j, lo, hi, speed = i[pair_order], j[pair_order], lo[pair_order], hi[pair_order], speed[pair_order]
