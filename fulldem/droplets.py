@@ -57,7 +57,8 @@ class DropletStore:
         self.count = 0
         self.next_ident = 0
         self.version = 0  # incremented by every change of the droplet set, order or capacity
-        self.size_version = 0  # incremented by every change of sizes or densities in place (set_sizes, growth)
+        self.size_version = 0  # incremented by every change in place of sizes, densities or positions at an event
+        # point (set_sizes, set_contact_diameters, displace): the DEM then checks its list and masses
         self.capacity = max(int(capacity), 1)
         for name, (width, dtype) in FIELDS.items():
             shape = (self.capacity,) if width is None else (self.capacity, width)
@@ -211,6 +212,12 @@ class DropletStore:
         """Set the contact diameters [m] of the given droplets (a marked pair's growth; at least their diameters)."""
         index = np.asarray(index, dtype=np.int64)
         self.contact_diameter[index] = np.maximum(contact_diameter, self.diameter[index])
+        self.size_version += 1
+
+    def displace(self, index, displacement) -> None:
+        """Move the given droplets by ``displacement`` (k, 3) [m] at an event point (a marked pair drawn together)."""
+        index = np.asarray(index, dtype=np.int64)
+        self.position[index] += displacement
         self.size_version += 1
 
     def set_sizes(self, diameter, density) -> None:
