@@ -30,6 +30,7 @@ import math
 import os
 
 from settler.cases import CaseError
+from settler.output import PROFILE_BANDS
 
 #: Most outputs (time-series rows and distribution snapshots) a run may write; the presets write 61 to 73.
 MAX_OUTPUTS = 100_000
@@ -52,6 +53,9 @@ SPEED_TABLE_PAIR_BYTES = 8 + 32
 #: Bytes per output beyond its arrays: the time-series row (a dict of floats) and the snapshot's dict and array
 #: headers, and the DataFrame row they become.
 OUTPUT_OVERHEAD_BYTES = 4096
+#: Bytes per channel-profile row (settler.output.CHANNEL_PROFILE; PROFILE_BANDS rows per output): a dict of five
+#: floats, measured 2026-12-02 with tracemalloc at 312 bytes, and its DataFrame row (40 bytes), rounded up.
+PROFILE_ROW_BYTES = 400
 
 
 def physical_memory() -> float | None:
@@ -128,8 +132,10 @@ def estimate(cells, sections: float, outputs: float, ages: int, speed_table: boo
         "state": field * (QUANTITY_COUNT + 3 + 2) + 8.0 * ZONE_COUNT * j * 4,
         "pairs": k * k * (PAIR_BYTES + (SPEED_TABLE_PAIR_BYTES if speed_table else 0)),
         "table": k * ages * 8.0,
-        # three (Z, J, K) and six (K,) arrays per output, twice (the list and the stacked arrays), and the rows
-        "snapshots": t * (2.0 * (3.0 * field + 6.0 * 8.0 * k) + OUTPUT_OVERHEAD_BYTES),
+        # three (Z, J, K) and six (K,) arrays per output, twice (the list and the stacked arrays), the rows, and
+        # the channel profile's rows
+        "snapshots": t * (2.0 * (3.0 * field + 6.0 * 8.0 * k) + OUTPUT_OVERHEAD_BYTES
+                          + PROFILE_BANDS * PROFILE_ROW_BYTES),
     }
     parts["total"] = sum(parts.values())
     return parts

@@ -172,7 +172,7 @@ def test_snapshots_read_back_with_meshio(tmp_path):
     assert m0.points.shape == (0, 3)
     assert m0.point_data["diameter"].shape == (0,)
     assert m0.point_data["velocity"].shape == (0, 3)
-    assert set(m0.point_data) == {"diameter", "velocity", "density", "age", "ident"}
+    assert set(m0.point_data) == {"diameter", "velocity", "density", "age", "ident", "merged"}
 
     m3 = meshio.read(tmp_path / "droplets_00001.vtu")
     assert m3.points.shape == (3, 3)

@@ -152,7 +152,7 @@ def test_submodels_act_at_the_step_event_points():
         def at_end(self, sim):
             self.seen.append(("end", sim.time))
 
-    sim = Simulation(load_case("demo", SMALL), feed=False)
+    sim = Simulation(load_case("demo", [*SMALL, "coalescence.enabled=false"]), feed=False)
     assert [type(m) for m in sim.submodels] == [Feed, Merges, Exits]
     recorder = Recorder()
     sim.submodels.insert(1, recorder)
