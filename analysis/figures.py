@@ -138,6 +138,31 @@ def _pick_snapshot(run, time, part):
     return t, path
 
 
+def _reference(run):
+    """The stored reference (analysis.reference) if ``run`` is a ``data/reference/<case>`` folder, else None."""
+    folder = check_run(run)
+    if not ((folder / "snapshots.npz").is_file() and (folder / "reference.json").is_file()):
+        return None
+    from .reference import load_reference
+
+    return load_reference(folder.name, folder.parent)
+
+
+def _reference_snapshot(reference, time):
+    """(index, time [s]) of a stored reference's snapshot nearest ``time`` (None: the last)."""
+    times = np.asarray(reference.snapshot_times, dtype=float)
+    if times.size == 0:
+        raise NoData("no snapshots stored in this reference")
+    if time is None:
+        k = times.size - 1
+    else:
+        time = float(time)
+        if not math.isfinite(time):
+            raise ValueError(f"time = {time!r}: give a finite snapshot time [s]")
+        k = int(min(range(times.size), key=lambda q: (abs(times[q] - time), -times[q])))
+    return k, float(times[k])
+
+
 def read_droplets(run, time=None) -> tuple[float, pd.DataFrame]:
     """The droplets of the snapshot nearest ``time`` [s] (None: the last): (its time [s], DataFrame).
 
@@ -148,6 +173,10 @@ def read_droplets(run, time=None) -> tuple[float, pd.DataFrame]:
     """
     import meshio
 
+    reference = _reference(run)
+    if reference is not None:  # a stored reference: its float32 snapshots
+        k, t = _reference_snapshot(reference, time)
+        return t, reference.droplets(k)
     t, path = _pick_snapshot(run, time, 0)
     mesh = meshio.read(path)
     points = np.asarray(mesh.points, dtype=float).reshape(-1, 3)
@@ -175,6 +204,14 @@ def read_slag(run, time=None) -> tuple[float, np.ndarray, np.ndarray]:
     such snapshot file or it holds no hexahedra with a velocity."""
     import meshio
 
+    reference = _reference(run)
+    if reference is not None:  # a stored reference keeps the central x-z plane only
+        k, t = _reference_snapshot(reference, time)
+        x, z, velocity = reference.slag(k)
+        if len(x) == 0:
+            raise NoData(f"the stored snapshot at t = {t:g} s has no slag plane")
+        centres = np.column_stack([x, np.full(len(x), reference.slag_plane_y(k)), z]).astype(float)
+        return t, centres, np.asarray(velocity, dtype=float).reshape(-1, 3)
     t, path = _pick_snapshot(run, time, 1)
     mesh = meshio.read(path)
     cells = mesh.cells_dict.get("hexahedron")

@@ -226,8 +226,8 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
     Copies ``timeseries.csv`` and ``case.toml`` (required), ``merges_by_size.csv`` and ``channel_profile.csv`` (if
     present) unchanged; writes ``snapshots.npz`` with ``snapshots`` droplet snapshots chosen by
     :func:`choose_snapshots` (float32; the slag velocity on the central x-z plane with each) and ``reference.json``
-    (see the module docstring). ``command`` defaults to metadata.json's "command", ``commit`` to ``git rev-parse
-    HEAD`` of this repository (None if that fails). The folder is written as a temporary sibling and renamed over the
+    (see the module docstring). ``command`` defaults to metadata.json's "command", ``commit`` to metadata.json's
+    "commit", else ``git rev-parse HEAD`` of this repository (None if that fails). The folder is written as a temporary sibling and renamed over the
     previous one, whose content is replaced. Over :data:`SIZE_LIMIT` bytes, fewer snapshots are kept (down to 1),
     noted in ``reference.json``'s ``notes``.
 
@@ -265,6 +265,8 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
     summary = _read_json(run / "summary.json")
     if command is None and isinstance(metadata, dict):
         command = metadata.get("command")
+    if commit is None and isinstance(metadata, dict):
+        commit = metadata.get("commit")  # the code that made the run (settler.output.write_run_metadata)
     if commit is None:
         commit = _git_commit()
 
@@ -523,9 +525,13 @@ def main(argv=None) -> int:
     parser.add_argument("--dest", default="data/reference", help="where references lie (default: data/reference)")
     parser.add_argument("--snapshots", type=int, default=4,
                         help="droplet snapshots to keep, spread evenly in time, the last always (default: 4)")
+    parser.add_argument("--commit", default=None,
+                        help="git commit of the code that made the run (default: the one in its metadata.json, "
+                             "else this checkout's)")
     args = parser.parse_args(argv)
     try:
-        folder = store_reference(args.run, args.case_name, dest_root=args.dest, snapshots=args.snapshots)
+        folder = store_reference(args.run, args.case_name, dest_root=args.dest, snapshots=args.snapshots,
+                                 commit=args.commit)
     except ValueError as exc:  # StoreError, and unreadable CSV files (pandas raises ValueError subclasses)
         print(f"{parser.prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2

@@ -254,13 +254,32 @@ def run_files(folder) -> list[Path]:
     return found
 
 
+def source_commit() -> dict:
+    """The git commit of the toolkit's source, if it runs from a git checkout: {"commit": hash or None, "dirty":
+    whether tracked files differ from it, or None}."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                timeout=10)
+        if commit.returncode != 0:
+            return {"commit": None, "dirty": None}
+        status = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                                capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return {"commit": None, "dirty": None}
+    return {"commit": commit.stdout.strip(), "dirty": bool(status.stdout.strip()) if status.returncode == 0 else None}
+
+
 def write_run_metadata(out_dir: str | os.PathLike, case, engine: str, **extra) -> None:
-    """Write ``case.toml`` (the resolved case) and ``metadata.json`` (engine, units, extra facts) into out_dir."""
+    """Write ``case.toml`` (the resolved case) and ``metadata.json`` (engine, version, the source's git commit,
+    units, extra facts) into out_dir."""
     from . import __version__
 
     out_dir = Path(out_dir)
     atomic_write_text(out_dir / "case.toml", case.to_toml())
-    meta = {"engine": engine, "settler_version": __version__, "case_source": case.source,
+    meta = {"engine": engine, "settler_version": __version__, **source_commit(), "case_source": case.source,
             "time_series_units": {c: u for c, (u, _) in TIME_SERIES.items()},
             "time_series_columns": {c: d for c, (_, d) in TIME_SERIES.items()}, **extra}
     atomic_write_text(out_dir / "metadata.json", to_json(meta))

@@ -262,3 +262,18 @@ def test_command_line(stored, tmp_path):
     empty.mkdir()
     bad = _cli(empty, "demo", "--dest", tmp_path / "refs")
     assert bad.returncode == 2 and "timeseries.csv" in bad.stderr
+
+
+def test_figures_draw_from_a_stored_reference(stored, tmp_path):
+    """`settler figures` on a data/reference/<case> folder: the snapshot figures come from its float32 snapshots
+    (the same droplets as the run's last snapshot, to float32), none of them is skipped."""
+    from analysis import figures
+
+    folder = stored[2]
+    written = figures.render_all(folder, tmp_path / "figs")
+    snapshot_figures = ("slice_diameter", "slice_velocity", "slice_slag", "density_height", "velocity_height")
+    skipped = {name: written[name] for name in snapshot_figures if not isinstance(written[name], Path)}
+    assert not skipped, skipped
+    t, frame = figures.read_droplets(folder)
+    ref = reference.load_reference(Path(folder).name, Path(folder).parent)
+    assert t == ref.snapshot_times[-1] and len(frame) == len(ref.droplets(-1))
