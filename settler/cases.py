@@ -343,11 +343,14 @@ def _read_toml(path: Path, what: str) -> dict:
 
 
 def case_path(name_or_path: str | os.PathLike) -> Path:
-    """Path of a preset name (``simple``) or of a case file path."""
+    """Path of a preset name (``simple``) or of a case file path. A folder of a preset's name (a run's output, say
+    ``settler full simple --out simple``) does not hide the preset."""
     p = Path(name_or_path)
+    preset = DATA_DIR / "cases" / f"{name_or_path}.toml"
+    if p.is_dir() and p.suffix != ".toml" and preset.is_file():
+        return preset
     if p.suffix == ".toml" or p.exists():
         return p
-    preset = DATA_DIR / "cases" / f"{name_or_path}.toml"
     if not preset.exists():
         raise CaseError(f"case {str(name_or_path)!r} is neither a file nor a preset; presets: "
                         + ", ".join(list_presets()))

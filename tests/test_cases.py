@@ -233,3 +233,14 @@ def test_importing_cases_leaves_scipy_stats_and_the_plotting_stack_out():
                           f"print([m for m in {heavy!r} if m in sys.modules])"],
                          capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_a_folder_named_like_a_preset_does_not_hide_it(tmp_path, monkeypatch):
+    """`settler full simple --out simple`, then `settler full simple --out simple --resume` from the same folder:
+    the argument is still the preset (found 2026-12-02: 'case file cubic is a folder')."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "cubic").mkdir()
+    assert load_case("cubic").case.name == "cubic"
+    (tmp_path / "mine").mkdir()  # a folder that is no preset is still refused as a case file
+    with pytest.raises(CaseError, match="is a folder"):
+        load_case("mine")
