@@ -52,8 +52,8 @@ import pandas as pd
 from settler.output import read_channel_profile, read_time_series, to_json
 
 #: Largest size [bytes] of one stored reference folder; above it fewer snapshots are kept (three cases must stay
-#: under 40 MB together).
-SIZE_LIMIT = 15_000_000
+#: under 40 MB together, and no tracked file should exceed 5 MB: one snapshot of 146 000 droplets is 3.7 MB).
+SIZE_LIMIT = 5_000_000
 #: Files copied unchanged from the run folder (the first two are required).
 REQUIRED_FILES = ("timeseries.csv", "case.toml")
 OPTIONAL_FILES = ("merges_by_size.csv", "channel_profile.csv")
