@@ -224,18 +224,24 @@ def error_table(table: pd.DataFrame, windows, skipped: dict[str, str] | None = N
     parts = []
     for column in COLUMNS:
         if column in skipped:
-            errors = window_errors([], [], [], [])
             errors = pd.DataFrame([{"window": w.name, "start": w.start, "end": w.end, "points": 0} for w in windows],
-                                  columns=errors.columns)
-            note = f"skipped: {skipped[column]}"
+                                  columns=ERROR_COLUMNS[1:-1])
+            errors["note"] = f"skipped: {skipped[column]}"
         else:
             errors = window_errors(table["time"], table[f"{column}_full"], table[f"{column}_reduced"], windows)
-            note = ""
+            errors["note"] = [_why_undefined(row) for row in errors.to_dict("records")]
         errors.insert(0, "column", column)
-        errors["note"] = [note or ("" if p else "no row in the window where both runs have values")
-                          for p in errors["points"]]
         parts.append(errors)
     return pd.concat(parts, ignore_index=True)[ERROR_COLUMNS]
+
+
+def _why_undefined(row: dict) -> str:
+    """Why a row of :func:`window_errors` has no relative error ("" if it has one)."""
+    if row["points"] == 0:
+        return "no row in the window where both runs have values"
+    if row["mean_full"] == 0.0:
+        return "the full run's window mean is 0: relative error undefined"
+    return ""
 
 
 @dataclasses.dataclass
@@ -357,7 +363,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("reduced", help="the reduced run: the --out folder of 'settler reduced'")
     parser.add_argument("--out", metavar="DIR", required=True,
                         help="folder to write comparison.csv, errors.csv, comparison.png and comparison.json into "
-                             "(created if missing; not a run folder)")
+                             "(created if missing; a run folder is refused; an earlier comparison there is "
+                             "replaced)")
     parser.add_argument("--windows", metavar="LIST", default=None,
                         help="time windows [s] for the errors, comma-separated: START:END, NAME=START:END, or the "
                              "words quarters (q1..q4 of the common span), steady (its last third), default (both; "

@@ -169,6 +169,9 @@ def test_command_writes_the_comparison(tmp_path, reduced_deep, capsys):
     by_hand = abs(both.iloc[:, 1].mean() - both.iloc[:, 0].mean()) / abs(both.iloc[:, 0].mean())
     got = errors[(errors["column"] == "droplet_count") & (errors["window"] == "early")]["relative_error"].item()
     assert got == pytest.approx(by_hand, rel=1e-9)
+    # nothing reaches the floor of the deep case in the first 10 s: no relative error, and the note says why
+    early = errors[(errors["column"] == "settled_fraction") & (errors["window"] == "early")].iloc[0]
+    assert early["mean_full"] == 0.0 and np.isnan(early["relative_error"]) and "mean is 0" in early["note"]
     info = json.loads((out / "comparison.json").read_text())
     assert info["full"]["engine"] == "fulldem" and info["reduced"]["engine"] == "popbal"
     assert info["windows"][1] == {"name": "steady", "start": pytest.approx(40.0 / 3.0), "end": 20.0}
