@@ -29,15 +29,35 @@ individually (hindered) in the outer zone, colliding by differential settling on
 [popbal] section and all to be calibrated against the full engine: c_ch (channel_coefficient, default 4/15 from
 the cloud solution), f_ch, the radius factor, shear_coefficient and collision_efficiency.
 
+Feed layer (issue 13, from the full engine's reference runs). The full runs do not feed a plume directly: the fed
+droplets first collect in a dense layer under the inlet and only then accelerate into the plume. At the end of the
+stored runs (data/reference/<case>/snapshots.npz) the top 5 mm hold 28 % of the simple case's droplets, moving
+down at 1.8 mm/s, and the droplets reach the plume's speed only 25-30 mm under the top (simple: 45 mm/s; deep:
+3.7 mm/s in the top 5 mm, 12 mm/s from 30 mm down); 42-45 % of all droplets are in the top tenth of the height in
+both cases, and a good share of the mergers happens there. The old form, which put every fed droplet straight into
+the plume at u_c, held half the simple case's droplets and merged almost none. The layer is the top
+``feed_layer_thickness`` (delta) of the channel zone, where the same cloud law applies with the layer's own
+coefficient and length scale, u_L = c_L phi drho g delta^2 / mu (``feed_layer_coefficient`` c_L): a slab fed at the
+volume flux j per unit area holds phi = j / u_L, so u_L = sqrt(c_L j drho g / mu) delta. Both scaled cases feed
+the same matte flux per inlet area (0.48 kg/m^2/s), which is why one (delta, c_L) can describe both.
+
+Axis velocity. ``channel_velocity`` in the shared time series is the *slag's* downward velocity on the axis at
+mid-height (settler.output). The droplets of the full runs move slower than the slag on the axis (simple: 36 mm/s
+on the centreline against 86 mm/s of slag), as droplets spread over a plume whose slag velocity peaks on the axis.
+u_c is the velocity of the droplet-laden cloud (what moves the droplets); the reduced model reports the axis
+velocity as ``axis_velocity_ratio`` x u_c (plus the downflow), a calibrated ratio (1: the old form).
+
 Not modelled (calibration will tell whether they matter): the return flow of slag in the outer zone and the
-exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel), the cloud's
-break-up, and inertia of the plume (Re > 1).
+exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel, and, in the
+simple case's lower half, carries them out of the slag jet), the cloud's break-up, and inertia of the plume
+(Re > 1).
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from settler.physics import STANDARD_GRAVITY
@@ -67,3 +87,21 @@ def steady_channel_fraction(volume_flux, radius, velocity):
 def plume_reynolds(velocity, radius, density_slag, viscosity):
     """Plume Reynolds number rho_s u_c R_c / mu [-] (on the radius)."""
     return density_slag * velocity * radius / viscosity
+
+
+def cloud_profile(z, height, channel_radius, channel_coefficient, layer_thickness=None, layer_coefficient=None):
+    """Cloud coefficient [-] and length scale [m] of every channel cell, arrays (J,) for cell centres z (J,) [m].
+
+    Below the feed layer: the plume's c_ch and R_c. In the feed layer (cells whose centre lies within
+    ``layer_thickness`` [m] of the top ``height`` [m], and at least the top cell when the thickness is > 0): the
+    layer's c_L and delta. ``layer_thickness`` None or 0: no layer (the old form).
+    """
+    z = np.asarray(z, dtype=float)
+    coefficient = np.full(z.shape, float(channel_coefficient))
+    radius = np.full(z.shape, float(channel_radius))
+    if layer_thickness:
+        layer = z >= height - layer_thickness
+        layer[np.argmax(z)] = True
+        coefficient[layer] = layer_coefficient
+        radius[layer] = layer_thickness
+    return coefficient, radius

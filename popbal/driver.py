@@ -139,6 +139,7 @@ class _Work:
         self.volume_fraction = np.zeros((len(ZONES), cells))
         self.collective = np.zeros((len(ZONES), cells))
         self.shear = np.zeros((len(ZONES), cells))
+        self.no_cloud = np.zeros(cells)  # the outer zone's cloud coefficient and radius: no collective velocity
         self.beta = np.zeros((sections, sections))
         self.births = np.zeros((QUANTITIES + 1, sections))
         self.k1 = np.zeros((QUANTITIES, sections))
@@ -155,11 +156,12 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
     cell_properties(content[zone], model.grid.pivots, model.grid.diameters, model.reacting, model.x_initial,
                     model.x_final, model.time_constant, model.velocity_table, model.age_step,
                     p["hindered_exponent"], model.feed_density, p["density_slag"], model.viscosity, model.gravity,
-                    p["channel_coefficient"] if channel else 0.0, model.channel_radius if channel else 0.0,
-                    model.downflow, work.diameters[zone], work.densities[zone], work.velocities[zone],
+                    model.cloud_coefficient if channel else work.no_cloud, model.cloud_radius if channel else
+                    work.no_cloud, model.downflow, work.diameters[zone], work.densities[zone], work.velocities[zone],
                     work.volume_fraction[zone], work.collective[zone])
     if channel and model.channel_radius > 0.0:
-        work.shear[zone] = p["shear_coefficient"] * work.collective[zone] / model.channel_radius
+        # G = shear_coefficient u / R with the cell's cloud scale (R_c in the plume, delta in the feed layer)
+        work.shear[zone] = p["shear_coefficient"] * work.collective[zone] / model.cloud_radius
     else:
         work.shear[zone] = 0.0
 
@@ -183,8 +185,8 @@ def _channel(model: Model, content: np.ndarray, work: _Work, cells: np.ndarray):
     """(channel radius [m], downward slag velocity on the axis [m/s], droplet volume [m^3]) of the given cells, as
     settler.output defines them for both engines. The zones are uniform: the channel a disk of radius R_c, the outer
     zone the rest of the cross-section, taken as an annulus out to the radius of a disk of the same area; the
-    half-volume radius follows in closed form. The velocity is the channel zone's plume velocity plus the downflow,
-    averaged over the cells."""
+    half-volume radius follows in closed form. The velocity is the slag's on the axis: axis_velocity_ratio x the
+    channel zone's plume velocity, plus the downflow, averaged over the cells (popbal.closures)."""
     if cells.size == 0:
         return math.nan, math.nan, 0.0
     d = work.diameters[:, cells, :]
@@ -199,7 +201,8 @@ def _channel(model: Model, content: np.ndarray, work: _Work, cells: np.ndarray):
         radius = r_c * math.sqrt(0.5 * total / per_zone[CHANNEL])
     else:
         radius = math.sqrt(r_c**2 + (0.5 * total - per_zone[CHANNEL]) / per_zone[OUTER] * (r_out**2 - r_c**2))
-    velocity = float(np.mean(work.collective[CHANNEL, cells] + model.downflow[cells]))
+    velocity = float(np.mean(model.parameters["axis_velocity_ratio"] * work.collective[CHANNEL, cells]
+                             + model.downflow[cells]))
     return radius, velocity, total
 
 

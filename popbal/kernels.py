@@ -336,7 +336,7 @@ def table_velocity(row, age, age_step):
 @njit(cache=True)
 def cell_properties(content, pivots, original_diameters, reacting, x_initial, x_final, time_constant,
                     velocity_table, age_step, hindered_exponent, density_feed, density_slag, viscosity, gravity,
-                    channel_coefficient, channel_radius, downflow, diameters, densities, velocities,
+                    cloud_coefficient, cloud_radius, downflow, diameters, densities, velocities,
                     volume_fraction, collective_velocity):
     """Per-cell droplet properties of one zone, evaluated at the start of a step.
 
@@ -345,9 +345,11 @@ def cell_properties(content, pivots, original_diameters, reacting, x_initial, x_
     velocity from the table, hindered by richardson_zaki_factor of the cell's matte volume fraction, plus the
     zone's collective (channel) velocity and the slag downflow at the cell's lower face.
 
-    Channel closure (derivation in popbal.closures): u_c = c_ch g R_c^2 sum_k phi_k (rho_k - rho_slag) / mu,
-    the Hadamard-Rybczynski velocity of a cloud of excess density phi (rho - rho_slag) when c_ch = 4/15; zero where
-    channel_coefficient or channel_radius is 0 (the outer zone).
+    Channel closure (derivation in popbal.closures): u_c = c_j g R_j^2 sum_k phi_k (rho_k - rho_slag) / mu with the
+    cell's cloud coefficient c_j = cloud_coefficient[j] [-] and length scale R_j = cloud_radius[j] [m] (J,): the
+    Hadamard-Rybczynski velocity of a cloud of excess density phi (rho - rho_slag) when c = 4/15 and R = R_c; in
+    the feed layer under the inlet c and R are the layer's (popbal.closures.cloud_profile); zero where the
+    coefficient or the radius is 0 (the outer zone).
 
     Outputs (filled): diameters, densities, velocities (J, K) [m, kg/m^3, m/s downwards]; volume_fraction and
     collective_velocity (J,) [-, m/s]. Empty sections take the age of the same section in the cell above (age 0 at
@@ -381,7 +383,7 @@ def cell_properties(content, pivots, original_diameters, reacting, x_initial, x_
             phi += phi_k
             excess += phi_k * (densities[j, k] - density_slag)
         volume_fraction[j] = phi
-        u_c = cloud_velocity(excess, channel_radius, viscosity, channel_coefficient, gravity)
+        u_c = cloud_velocity(excess, cloud_radius[j], viscosity, cloud_coefficient[j], gravity)
         collective_velocity[j] = u_c
         hindrance = richardson_zaki_factor(min(phi, 1.0), hindered_exponent)
         for k in range(n_k):

@@ -47,6 +47,8 @@ class Model:
     while t < feed_end. downflow (J,) [m/s]: slag velocity at each cell's lower face; sink_rate (J,) [1/s]: slag
     withdrawal per unit volume. velocity_table (K, M) [m/s] single-droplet settling velocity over age, age_step [s].
     residence_time [s]: slag mass / slag feed rate (inf without slag feed). stop_time [s]: when the run ends.
+    cloud_coefficient [-] and cloud_radius [m] (J,): the channel zone's cloud law per cell, the plume's below the
+    feed layer and the layer's in it (popbal.closures.cloud_profile).
     """
 
     case: Case
@@ -74,6 +76,8 @@ class Model:
     x_final: float
     time_constant: float
     viscosity: float
+    cloud_coefficient: np.ndarray
+    cloud_radius: np.ndarray
     gravity: float = STANDARD_GRAVITY
     parameters: dict = field(default_factory=dict)
 
@@ -106,6 +110,12 @@ def build(case: Case) -> Model:
     if channel_area >= box_area:
         raise CaseError(f"popbal.channel_radius_factor = {p.channel_radius_factor!r}: the channel (radius "
                         f"{channel_radius:g} m) must be smaller than the box cross-section {g.width:g} x {g.depth:g} m")
+    if p.feed_layer_thickness and p.feed_layer_coefficient is None:
+        raise CaseError(f"popbal.feed_layer_thickness = {p.feed_layer_thickness!r} m: needs popbal.feed_layer_coefficient "
+                        "(a number >= 0); allowed: give both, or neither (no feed layer)")
+    if p.feed_layer_thickness is not None and p.feed_layer_thickness > g.height:
+        raise CaseError(f"popbal.feed_layer_thickness = {p.feed_layer_thickness!r} m: allowed at most the slag height "
+                        f"geometry.height = {g.height:g} m")
     if channel_area == 0.0 and p.channel_feed_fraction > 0.0:
         raise CaseError(f"popbal.channel_feed_fraction = {p.channel_feed_fraction!r}: allowed 0 when "
                         "popbal.channel_radius_factor = 0 (no channel zone)")
@@ -122,6 +132,8 @@ def build(case: Case) -> Model:
     cells = p.height_cells
     dz = g.height / cells
     z = (np.arange(cells) + 0.5) * dz
+    cloud_coefficient, cloud_radius = closures.cloud_profile(z, g.height, channel_radius, p.channel_coefficient,
+                                                             p.feed_layer_thickness, p.feed_layer_coefficient)
 
     # slag: residence time, and in 'vertical' flow a downflow that the outlet band withdraws
     slag_volume_rate = case.slag.feed_rate / case.slag.density
@@ -184,6 +196,7 @@ def build(case: Case) -> Model:
         "hindered_exponent": p.hindered_exponent,
         "channel_coefficient": p.channel_coefficient,
         "shear_coefficient": p.shear_coefficient,
+        "axis_velocity_ratio": 1.0 if p.axis_velocity_ratio is None else p.axis_velocity_ratio,
         "max_courant": p.max_courant,
         "time_step": p.time_step,
         "output_interval": p.output_interval,
@@ -198,7 +211,8 @@ def build(case: Case) -> Model:
                  feed_multiplier=feed_multiplier, feed_end=feed_end, downflow=downflow, sink_rate=sink_rate,
                  velocity_table=table, age_step=tau / TABLE_PER_TAU, residence_time=residence, stop_time=stop_time,
                  horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
-                 viscosity=case.slag_viscosity, parameters=parameters)
+                 viscosity=case.slag_viscosity, cloud_coefficient=cloud_coefficient, cloud_radius=cloud_radius,
+                 parameters=parameters)
 
 
 def check_size(case: Case, volume_min: float, volume_top: float) -> dict[str, float]:
@@ -284,6 +298,8 @@ def start_up_numbers(model: Model) -> list[Quantity]:
             Quantity("steady channel volume fraction", phi, "-", "Q_ch / (pi R_c^2 u_c)"),
             Quantity("plume Reynolds number", closures.plume_reynolds(u_c, model.channel_radius, case.slag.density,
                                                                       model.viscosity), "-", "rho_s u_c R_c / mu"),
+            Quantity("feed layer velocity u_L (steady, dilute)", _layer_velocity(model, q_channel, excess), "m/s",
+                     "sqrt(c_L j drho g / mu) delta, j = Q_ch / (pi R_c^2); nan without a feed layer"),
             Quantity("channel shear rate G", model.parameters["shear_coefficient"] * u_c / model.channel_radius,
                      "1/s", "shear_coefficient u_c / R_c"),
             Quantity("Courant number of u_c at time_step", u_c * model.parameters["time_step"] / model.cell_height,
@@ -299,3 +315,13 @@ def start_up_numbers(model: Model) -> list[Quantity]:
         out.append(Quantity("feed window of the column", model.feed_end, "s",
                             "residence time x inlet area / box area"))
     return out
+
+
+def _layer_velocity(model: Model, volume_flux: float, excess_density: float) -> float:
+    """Steady feed-layer velocity u_L = sqrt(c_L j drho g / mu) delta [m/s] (popbal.closures), nan without a layer."""
+    p = model.case.popbal
+    if not p.feed_layer_thickness:
+        return math.nan
+    j = volume_flux / model.zone_area[CHANNEL]
+    return math.sqrt(p.feed_layer_coefficient * j * excess_density * model.gravity / model.viscosity) \
+        * p.feed_layer_thickness

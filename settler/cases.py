@@ -4,8 +4,11 @@ A case is resolved in layers, later ones winning:
 
 1. the *property set* named by ``case.properties`` (``data/properties/<name>.toml``): slag, matte, feed and model
    constants, each with its source;
-2. the *case file* (``data/cases/<name>.toml`` or any path): geometry, feeds, size limit, submodel switches;
-3. *overrides* ``section.key=value`` from the command line or from :func:`load_case`'s ``overrides``.
+2. the *calibration layer* named by ``case.calibration`` (``data/calibration/<name>.toml``, written by ``settler
+   calibrate``): popbal's closures fitted to the full engine's reference runs, with their provenance in a
+   ``[provenance]`` table that is not merged; ``"none"``: no layer;
+3. the *case file* (``data/cases/<name>.toml`` or any path): geometry, feeds, size limit, submodel switches;
+4. *overrides* ``section.key=value`` from the command line or from :func:`load_case`'s ``overrides``.
 
 The schema below is the one place where every key, its type, unit, allowed range and meaning are written; the
 README's case-file reference is generated from it (``settler cases --schema``). Values are SI throughout.
@@ -69,6 +72,10 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "description": Field(S, "", "One line on what the case is."),
         "properties": Field(S, "", "Property set in data/properties/ providing the defaults; without one, the case "
                                   "file must give every key.", optional=True),
+        "calibration": Field(S, "", "Calibration layer in data/calibration/ (e.g. 'paper': popbal's closures fitted "
+                                    "to the full engine's reference runs by 'settler calibrate'), applied over the "
+                                    "property set and under the case file and overrides; absent or 'none': none.",
+                             optional=True),
     },
     "geometry": {
         "height": Field(F, "m", "Slag layer height h (z, gravity along -z).", 0.0, exclusive_minimum=True),
@@ -216,6 +223,15 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "channel_radius_factor": Field(F, "-", "Channel radius R_c in inlet radii (0: no channel zone).", 0.0),
         "feed_duration": Field(F, "s", "Matte feed stops after this time; absent: feeds for the whole run.", 0.0,
                                exclusive_minimum=True, optional=True),
+        "feed_layer_thickness": Field(F, "m", "Thickness delta of the feed layer at the top of the channel zone, where "
+                                              "fed droplets collect before the plume takes them (popbal.closures); "
+                                              "absent or 0: none (fed droplets enter the plume at once).", 0.0,
+                                      optional=True),
+        "feed_layer_coefficient": Field(F, "-", "c_L of the feed layer's velocity u_L = c_L phi drho g delta^2 / mu "
+                                                "(needed when feed_layer_thickness > 0).", 0.0, optional=True),
+        "axis_velocity_ratio": Field(F, "-", "Slag velocity on the channel axis (the channel_velocity output) / the "
+                                             "plume velocity u_c that carries the droplets; absent: 1.", 0.0,
+                                     exclusive_minimum=True, optional=True),
     },
 }
 del F, I, B, S, L
@@ -399,6 +415,7 @@ def resolve(raw: dict, overrides=None, source: str = "") -> Case:
         overrides = dict(parse_override(o) for o in overrides)
     overrides = dict(overrides or {})
     prop_name = overrides.get("case.properties", raw.get("case", {}).get("properties"))
+    calibration = overrides.get("case.calibration", raw.get("case", {}).get("calibration"))
     merged: dict[str, dict] = {}
     if prop_name is not None:
         if not isinstance(prop_name, str):
@@ -409,6 +426,8 @@ def resolve(raw: dict, overrides=None, source: str = "") -> Case:
             raise CaseError(f"case.properties = {prop_name!r}: no property set {ppath}; available: "
                             + ", ".join(sorted(p.stem for p in (DATA_DIR / "properties").glob("*.toml"))))
         _merge(merged, _read_toml(ppath, "property set"), f"property set {prop_name}")
+    if calibration is not None and calibration != NO_CALIBRATION:
+        _merge(merged, read_calibration(calibration), f"calibration layer {calibration}")
     _merge(merged, raw, source or "case")
     for key, value in overrides.items():
         section, _, name = key.partition(".")
@@ -417,6 +436,29 @@ def resolve(raw: dict, overrides=None, source: str = "") -> Case:
         _check_known(section, name, f"override {key}")
         merged.setdefault(section, {})[name] = value
     return _validate(merged, source)
+
+
+#: Value of case.calibration that applies no layer (so an override can switch a preset's layer off).
+NO_CALIBRATION = "none"
+#: Table of a calibration layer that records where its values come from; not case keys, so not merged.
+PROVENANCE_TABLE = "provenance"
+
+
+def calibration_path(name: str) -> Path:
+    """Path of the calibration layer ``name`` (data/calibration/<name>.toml)."""
+    return DATA_DIR / "calibration" / f"{name}.toml"
+
+
+def read_calibration(name) -> dict:
+    """The case sections of calibration layer ``name`` (its [provenance] table left out); CaseError if absent."""
+    folder = DATA_DIR / "calibration"
+    if not isinstance(name, str) or not calibration_path(name).is_file():
+        available = ", ".join(sorted(p.stem for p in folder.glob("*.toml"))) or "none"
+        raise CaseError(f"case.calibration = {name!r}: no calibration layer {folder / f'{name}.toml'}; "
+                        f"available: {available}")
+    layer = _read_toml(calibration_path(name), "calibration layer")
+    layer.pop(PROVENANCE_TABLE, None)
+    return layer
 
 
 def _check_known(section: str, key: str | None, where: str):
