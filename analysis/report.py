@@ -21,8 +21,9 @@ among the report's cells, 1-based, and its first line) and the error: an excepti
 ``raises-exception``, which nbclient would let pass), ``sys.exit`` inside a cell, a cell over the timeout, a kernel
 that dies (``os._exit``, a crash, killed for memory) or does not start. The partly executed notebook is then kept as
 ``DIR/NAME.failed.ipynb`` for its traceback, and ``NAME.ipynb`` / ``NAME.html`` are not written (those of an earlier
-success are left as they were). Refused input exits 2: an unknown report, an unknown parameter name (one not
-assigned in the parameters cell), a value that is not a TOML literal or not of the default's type.
+success are left as they were). Refused input exits 2, before any kernel starts: an unknown report, an unknown
+parameter name (one not assigned in the parameters cell), a value that is neither a TOML literal nor a bare word (a
+bare word is a string), or one not of the default's type.
 """
 
 from __future__ import annotations
