@@ -161,15 +161,34 @@ def _engine(module_name):
     return add_arguments, run
 
 
+def _tool(module_name):
+    """(add_arguments, run) of an analysis command module, imported only when its command is used: the module has
+    ``add_arguments(parser)`` (all its arguments) and ``main(args)`` (the exit status). Unlike an engine's, the
+    command takes no case argument of its own."""
+    def add_arguments(parser):
+        importlib.import_module(module_name).add_arguments(parser)
+
+    def run(args):
+        return importlib.import_module(module_name).main(args)
+
+    return add_arguments, run
+
+
 #: The subcommands: name -> (add_arguments, run, help). The engines register their command modules here by name;
 #: the shared layer imports none of them until its command is chosen.
 ENGINES = {"reduced": ("popbal.cli", "run the reduced population-balance model (popbal) of a case"),
            "full": ("fulldem.cli", "run the coupled CFD-DEM engine (fulldem) on a case")}
+#: The analysis commands (package analysis/), imported the same way: name -> (module, help).
+TOOLS = {"compare": ("analysis.compare", "compare a full run with a reduced run column by column"),
+         "calibrate": ("analysis.calibrate", "fit the reduced model's closures to the stored reference runs"),
+         "sweep": ("analysis.sweep", "run the reduced model over a grid or a sampled design of case keys"),
+         "report": ("analysis.report", "execute a report notebook from reports/ and write it as .ipynb and HTML")}
 COMMANDS = {
     "info": (_info_arguments, _info, "print a resolved case and its derived numbers"),
     "cases": (_cases_arguments, _cases, "list the case presets, or print the case-file reference"),
     "figures": (_figures_arguments, _figures, "draw the seed paper's figures from a run folder as PNGs"),
     **{name: (*_engine(module), text) for name, (module, text) in ENGINES.items()},
+    **{name: (*_tool(module), text) for name, (module, text) in TOOLS.items()},
 }
 
 
