@@ -94,6 +94,11 @@ METRICS: dict[str, tuple[str, str]] = {
 #: Metrics plotted against each swept key and analysed for sensitivity: name -> (axis label, scale to the label).
 PLOTTED = {"matte_loss": ("matte loss [%]", 100.0), "settled_fraction": ("settled fraction [%]", 100.0),
            "mean_diameter": ("mean diameter at size_time [um]", 1e6)}
+#: Outputs whose sensitivity indices are computed: name -> title. log10_matte_loss ranks relative (factor) changes:
+#: where the loss spans decades over the box, the variance of the loss itself is set by the few points with the
+#: largest loss (analysed only when every loss is > 0).
+ANALYSED = {"matte_loss": "matte loss", "log10_matte_loss": "log10 of the matte loss",
+            "settled_fraction": "settled fraction", "mean_diameter": "mean diameter"}
 DONE_FILE = "done.json"
 ERROR_FILE = "error.json"
 POINTS = "points"
@@ -545,6 +550,8 @@ def sweep(case, axes, design: str = "grid", samples: int | None = None, out="swe
     workers, scheduler, client: where the points run (:class:`Executor`; ``client`` an open dask Client to reuse).
     points_dir: the folder of point folders (default ``out/points``; several sweeps may share one). Finished points
     are read back, not rerun. Raises CaseError / OutputError for refused input; failed points are in the table.
+    A script that calls it with workers > 0 needs the ``if __name__ == "__main__":`` guard (the LocalCluster's
+    worker processes are spawned and import the script's module); notebooks do not.
     """
     started = time.perf_counter()
     check_workers(workers)
@@ -681,17 +688,22 @@ def write_netcdf(table: pd.DataFrame, plan: Design, path: Path, base: Case) -> P
 
 # ----------------------------------------------------------------------------------------------------- sensitivity
 def sensitivity(table: pd.DataFrame, plan: Design, seed: int = 0) -> tuple[pd.DataFrame | None, str]:
-    """SALib's indices of each :data:`PLOTTED` metric over the swept keys: Sobol S1, ST (with 95 % confidence
-    half-widths) or Morris mu*, mu, sigma (mu* in the metric's unit per full range of the key; on log10 for log
-    axes). (None, reason) when a point failed (the estimators need every point)."""
+    """SALib's indices of each :data:`ANALYSED` output over the swept keys: Sobol S1, ST (with 95 % confidence
+    half-widths) or Morris mu*, mu, sigma (mu* in the output's unit per full range of the key; on log10 for log
+    axes); ``rank`` 1 for the largest ST or mu* per output. (None, reason) when a point failed (the estimators need
+    every point); an output that is not finite at every point (log10 of a zero loss) gets NaN indices."""
     from SALib.analyze import morris, sobol
 
     failed = int((table["status"] != "done").sum())
     if failed:
         return None, f"no sensitivity indices: {failed} point(s) failed, and SALib needs every point"
     rows = []
-    for metric in PLOTTED:
-        y = table[metric].to_numpy(dtype=float)
+    for metric in ANALYSED:
+        if metric == "log10_matte_loss":
+            with np.errstate(divide="ignore", invalid="ignore"):
+                y = np.log10(table["matte_loss"].to_numpy(dtype=float))
+        else:
+            y = table[metric].to_numpy(dtype=float)
         if not np.all(np.isfinite(y)):
             rows += [{"metric": metric, "parameter": a.key} for a in plan.swept]
             continue
@@ -783,7 +795,8 @@ def plot_sensitivity(frame: pd.DataFrame, design: str, title: str = ""):
     scale)."""
     from matplotlib.figure import Figure
 
-    metrics = list(dict.fromkeys(frame["metric"]))
+    metrics = [m for m in dict.fromkeys(frame["metric"])
+               if frame.loc[frame["metric"] == m].notna().all(axis=None)]
     fig = Figure(figsize=(4.2 * len(metrics), 0.5 * frame["parameter"].nunique() + 2.0), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(metrics), sharey=True))
     for ax, metric in zip(axes, metrics):
@@ -798,7 +811,7 @@ def plot_sensitivity(frame: pd.DataFrame, design: str, title: str = ""):
             ax.barh(y, part["mu_star"] / top, 0.6, xerr=part["mu_star_conf"] / top, label="mu* / max mu*")
             ax.set_xlabel("Morris mu* (relative)")
         ax.set_yticks(y, part["parameter"])
-        ax.set_title(PLOTTED[metric][0].split(" [")[0])
+        ax.set_title(ANALYSED[metric])
         ax.grid(alpha=0.3, axis="x")
         ax.legend(fontsize=7)
     fig.suptitle(f"{title}: {design} sensitivity" if title else f"{design} sensitivity")
@@ -822,27 +835,27 @@ FURNACE_BASE = {
 }
 #: Coarser still for quick=True (report CI: numbers that run in seconds, not results).
 FURNACE_QUICK = {"popbal.height_cells": 20, "popbal.time_step": 120.0, "popbal.output_interval": 1800.0}
-#: The study's axes: key -> (low, high, source). The one-at-a-time trends take TREND_POINTS values over each range,
-#: the others at the baseline; the global designs sample the same box.
+#: The study's axes: key -> (low, high, source). The one-at-a-time trends take TREND_POINTS values over each range
+#: (linear; the baseline value is one of them), the others at the baseline; the global designs sample the same box.
 FURNACE_AXES = {
     "slag.temperature": (1493.15, 1593.15, "[lit] 1220-1320 C, the settler slag temperatures of the seed paper "
                                            "(section 1); viscosity 0.86-0.25 Pa s by the Arrhenius law of the "
                                            "property set (0.45 Pa s at 1270 C)"),
     "feed.mean_diameter": (100e-6, 400e-6, "[chosen] around the 200 um baseline (table's mass-mean 247 um, "
                                            "Jylha et al. 2020)"),
-    "feed.scale_std": (0.1, 0.45, "[chosen] narrow (0.1, the seed paper's Table 3) to wide (0.45 of the mean; the "
-                                  "truncation at 0.1-1.9 is 2 std)"),
+    "feed.scale_std": (0.1, 0.4, "[chosen] narrow (0.1, the seed paper's Table 3) to wide (0.4 of the mean; the "
+                                 "truncation at 0.1-1.9 is then 2.25 std)"),
     "geometry.height": (0.5, 1.5, "[chosen] slag depth around the preset's 1 m; at a fixed slag feed the residence "
                                   "time grows with it (3-9 h)"),
-    "slag.feed_rate": (10.0, 40.0, "[chosen] slag throughput around the preset's 20.4 kg/s: residence 12 h to 3 h "
-                                   "at 1 m"),
+    "slag.feed_rate": (10.208333333333334, 40.833333333333336, "[chosen] slag throughput 0.5 to 2 times the "
+                       "preset's 20.4 kg/s (derived there from a 6 h residence): residence 12 h to 3 h at 1 m"),
     "popbal.collision_efficiency": (0.0, 1.0, "[chosen] from no coalescence to every collision (1, the uncalibrated "
                                               "preset)"),
 }
 TREND_POINTS = 7
 #: Global designs of the full study: Sobol N (points N (D + 2)), Morris trajectories (points r (D + 1)).
-FURNACE_SOBOL_SAMPLES = 32
-FURNACE_MORRIS_TRAJECTORIES = 10
+FURNACE_SOBOL_SAMPLES = 64
+FURNACE_MORRIS_TRAJECTORIES = 20
 
 
 def furnace_study(out, quick: bool = False, workers: int | None = None, scheduler: str | None = None,
@@ -855,8 +868,10 @@ def furnace_study(out, quick: bool = False, workers: int | None = None, schedule
     (``out/morris/``, FURNACE_MORRIS_TRAJECTORIES trajectories), each with sensitivity.csv and .png. All sweeps
     share ``out/points`` and one cluster, so a rerun or a point repeated between designs is not run again.
     quick=True: 3 values per key, Morris with 2 trajectories, no Sobol, at FURNACE_QUICK resolution, in this
-    process unless ``workers`` is given, without the per-trend PNGs (seconds; for report CI). Returns {"trends": {key: SweepResult}, "sobol",
-    "morris": SweepResult or None, "figure": Path, "ranking": DataFrame}.
+    process unless ``workers`` is given, without the per-trend PNGs (seconds; for report CI). Writes
+    ``ranking.csv`` (:func:`ranking`) and ``study.json`` (baseline, axes with sources). Returns {"trends": {key:
+    SweepResult}, "sobol", "morris": SweepResult or None, "figure": Path, "ranking": DataFrame}. From a script,
+    call it under ``if __name__ == "__main__":`` (see :func:`sweep`).
     """
     out = prepare_output_folder(out, resume=True)
     base = case_with_overrides("furnace", {**FURNACE_BASE, **(FURNACE_QUICK if quick else {})})
@@ -886,21 +901,26 @@ def furnace_study(out, quick: bool = False, workers: int | None = None, schedule
 
 
 def ranking(results: dict) -> pd.DataFrame:
-    """What changes the matte loss most: per swept key, Sobol ST and S1 (if run), Morris mu* and the one-at-a-time
-    range of the loss (max - min over the trend), ordered by the first of these present."""
+    """What changes the matte loss most, one row per key of FURNACE_AXES: the one-at-a-time range of the loss
+    (``trend_loss_min``, ``_max``, ``_range``) and, for each global design run, its indices of the loss and of its
+    log10 (``sobol_<output>_ST``, ``_ST_conf``, ``_S1``, ``_S1_conf``; ``morris_<output>_mu_star``,
+    ``_mu_star_conf``). Ordered by the first present of Morris mu* of log10 loss, Sobol ST of log10 loss, the trend
+    range: relative changes, since the loss spans decades over the box."""
     rows = {key: {"parameter": key} for key in FURNACE_AXES}
     for key, trend in results["trends"].items():
         loss = trend.table["matte_loss"]
         rows[key].update(trend_loss_min=float(loss.min()), trend_loss_max=float(loss.max()),
                          trend_loss_range=float(loss.max() - loss.min()))
-    for design, columns in (("sobol", ("ST", "ST_conf", "S1", "S1_conf")), ("morris", ("mu_star", "mu_star_conf"))):
-        frame = results.get(design).sensitivity if results.get(design) is not None else None
+    indices = {"sobol": ("ST", "ST_conf", "S1", "S1_conf"), "morris": ("mu_star", "mu_star_conf")}
+    for design, columns in indices.items():
+        frame = results[design].sensitivity if results.get(design) is not None else None
         if frame is None:
             continue
-        for _, row in frame[frame["metric"] == "matte_loss"].iterrows():
-            rows[row["parameter"]].update({f"{design}_{c}" if design == "morris" else c: row.get(c) for c in columns})
+        for _, row in frame[frame["metric"].isin(["matte_loss", "log10_matte_loss"])].iterrows():
+            rows[row["parameter"]].update({f"{design}_{row['metric']}_{c}": row.get(c) for c in columns})
     table = pd.DataFrame(list(rows.values()))
-    order = next((c for c in ("ST", "morris_mu_star", "trend_loss_range") if c in table), None)
+    order = next((c for c in ("morris_log10_matte_loss_mu_star", "sobol_log10_matte_loss_ST", "trend_loss_range")
+                  if c in table and table[c].notna().all()), None)
     return table.sort_values(order, ascending=False).reset_index(drop=True) if order else table
 
 
@@ -961,8 +981,13 @@ def main(args) -> int:
                         "cluster's workers are started with it)")
     base = case_with_overrides(args.case)
     out = args.out if args.out is not None else f"sweep-{base.case.name}"
-    result = sweep(base, args.overrides, args.design, args.samples, out, args.workers, args.scheduler, args.seed,
-                   progress=not args.quiet, command_line=getattr(args, "command_line", None))
+    try:
+        result = sweep(base, args.overrides, args.design, args.samples, out, args.workers, args.scheduler,
+                       args.seed, progress=not args.quiet, command_line=getattr(args, "command_line", None))
+    except KeyboardInterrupt:
+        print(f"settler sweep: interrupted; the finished points are kept in {Path(out) / POINTS}/ and the same "
+              "command skips them", file=sys.stderr)
+        return 130
     done = result.table[result.table["status"] == "done"]
     print(f"settler sweep {base.case.name}: {len(result.table)} points ({result.ran} run, {result.skipped} resumed) "
           f"in {result.wall_time:.1f} s; outputs in {result.out}/")
