@@ -346,8 +346,9 @@ def calibrate(cases=("simple",), holdout: str | None = "deep", parameters=DEFAUL
 
     # the Jacobian by forward differences of 1 % of each parameter's span: popbal's outputs move in small steps
     # with a parameter (sections, cells), so a relative step near round-off would measure the grid, not the model
+    # least_squares counts residual evaluations without the Jacobian's p columns: budget (p + 1) runs per iteration
     fit = least_squares(model_residuals, x0, bounds=(low, high), diff_step=1e-2, x_scale=high - low,
-                        max_nfev=max_evaluations, method="trf")
+                        max_nfev=max(1, max_evaluations // (len(parameters) + 1)), method="trf")
     bar.close()
     estimates = dict(zip(parameters, fit.x))
     standard_errors, correlation, singular, weakest = parameter_uncertainty(fit.jac, fit.fun, fit.x, parameters)
