@@ -162,3 +162,15 @@ def test_layer_round_trips_and_an_override_still_wins(fitted, tmp_path, monkeypa
     assert plain.popbal.channel_coefficient == pytest.approx(4.0 / 15.0)
     with pytest.raises(CaseError, match="case.calibration = 'missing': no calibration layer .*available"):
         load_case("simple", {"case.calibration": "missing"})
+
+
+def test_simple_preset_is_calibrated_out_of_the_box():
+    """data/cases/simple.toml names the 'paper' layer: its [popbal] values reach the case, an explicit override
+    wins, and the furnace preset (fitted on 0.2 m boxes only) does not take the layer."""
+    layer = tomllib.loads(cases_module.calibration_path("paper").read_text())["popbal"]
+    case = load_case("simple")
+    assert case.case.calibration == "paper"
+    for name, value in layer.items():
+        assert getattr(case.popbal, name) == value, name
+    assert load_case("simple", ["popbal.collision_efficiency=0.5"]).popbal.collision_efficiency == 0.5
+    assert load_case("furnace").case.calibration is None
