@@ -741,6 +741,19 @@ def _axis_label(key: str) -> str:
     return f"{key} [{unit}]" if unit and unit != "-" else key
 
 
+def _style(ax, key: str, metric: str, values) -> None:
+    """Axis label and grid; scientific x ticks for small numbers (diameters in m); a log y axis for the loss when
+    it spans more than two decades (all > 0)."""
+    ax.set_xlabel(_axis_label(key))
+    if _field(key).kind in (float, int):
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))
+    y = np.asarray(values, dtype=float)
+    y = y[np.isfinite(y)]
+    if metric == "matte_loss" and y.size and y.min() > 0.0 and y.max() > 100.0 * y.min():
+        ax.set_yscale("log")
+    ax.grid(alpha=0.3)
+
+
 def _positions(values: pd.Series):
     """x positions of a column: numbers as they are, anything else as categories (positions, tick labels)."""
     if pd.api.types.is_numeric_dtype(values) and not pd.api.types.is_bool_dtype(values):
@@ -780,9 +793,11 @@ def plot_trends(table: pd.DataFrame, plan: Design, key: str, title: str = ""):
                 ax.fill_between(x, summary["min"] * scale, summary["max"] * scale, alpha=0.25, label="range")
         if labels is not None:
             ax.set_xticks(range(len(labels)), labels)
-        ax.set_xlabel(_axis_label(key))
+            ax.set_xlabel(_axis_label(key))
+            ax.grid(alpha=0.3)
+        else:
+            _style(ax, key, metric, ok[metric])
         ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
     if axes[0].get_legend_handles_labels()[0]:
         axes[0].legend(fontsize=7)
     fig.suptitle(f"{title}: {plan.name} sweep over {key}" if title else f"{plan.name} sweep over {key}")
@@ -933,9 +948,8 @@ def plot_study(trends: dict):
     for ax, (key, trend) in zip(axes, trends.items()):
         ok = trend.table[trend.table["status"] == "done"].sort_values(key)
         ax.plot(ok[key], ok["matte_loss"] * 100.0, "o-", ms=3)
-        ax.set_xlabel(_axis_label(key))
+        _style(ax, key, "matte_loss", ok["matte_loss"])
         ax.set_ylabel("matte loss [%]")
-        ax.grid(alpha=0.3)
     fig.suptitle("furnace: matte lost with the slag, one key at a time (others at the study baseline)")
     return fig
 
