@@ -234,7 +234,7 @@ def test_quick_furnace_study_ranks_every_axis(tmp_path):
         assert len(trend.table) == 3 and (trend.table["status"] == "done").all()
         low, high, source = sw.FURNACE_AXES[key]
         assert trend.table[key].min() == pytest.approx(low) and trend.table[key].max() == pytest.approx(high)
-        assert source.startswith(("[lit]", "[chosen]"))
+        assert source.startswith(("[lit]", "[chosen]", "[derived]"))
     assert results["figure"].is_file() and (tmp_path / "morris" / "sensitivity.png").is_file()
     # one folder per distinct point: the baseline, in several trends, ran once
     tables = [t.table for t in results["trends"].values()] + [results["morris"].table]
