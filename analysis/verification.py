@@ -181,7 +181,8 @@ def torus_run(n_a_over_r=5.0, duration=14.0, reynolds=1.0, snapshots=6, seed=7, 
     end = duration * cloud.radius / cloud.stokes
     marks = list(np.linspace(0.0, end, snapshots))
     shots, times, centroid = [], [0.0], [start]
-    with tqdm(total=end, unit="s", desc="falling cloud", disable=not progress) as bar:
+    # a bar redrawn at most every 5 s: in a notebook every redraw is kept in the cell's output
+    with tqdm(total=end, unit="s", desc="falling cloud", disable=not progress, mininterval=5.0) as bar:
         while marks:
             if sim.time >= marks[0] - 1e-9:
                 shots.append((sim.time, (start - follow.position[:, 2].mean()) / cloud.radius,
