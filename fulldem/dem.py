@@ -53,7 +53,8 @@ advance's start from positions that are exact there, with budgets checked afterw
   droplets carried together by the slag (50 mm/s in the simple case's channel) move 100 um per fluid step but
   barely towards each other (|u_p - u_q| T: 1 um median, 7 um at the 99th percentile);
 * pairs off the list had a gap of at least skin - 2 x travel bound at the advance's start, so p is free only if
-  |u_p| T + s_p + max_q (|u_q| T + S_q) fits in that;
+  |u_p| T + s_p + D fits in that, D the farthest another droplet can go: max_q (|u_q| T + S_q), or skin/2 - travel
+  bound if less (the list stays valid within the advance: checked after the steps, with the budgets);
 * after the sub-steps, any sub-stepped droplet over its budget (:func:`free_flight_violations`) voids the
   guarantee: the advance is redone from its saved start with every droplet sub-stepped, so a breach costs time,
   never accuracy. So does a neighbour-list check falling inside the advance (a rebuild would renumber the list
@@ -1209,6 +1210,8 @@ class DemStepper:
         """The neighbour list and the travel bound since its build, for a checkpoint (see :meth:`restore_list`)."""
         state = self.neighbours.state()
         state["travel_bound"] = np.array([self._travel_bound])
+        # what free flight expects of the next advance (it decides whether the list is checked at its start)
+        state["advance_travel"] = np.array([self._advance_travel, self._advance_steps])
         return state
 
     def restore_list(self, state: dict) -> None:
@@ -1223,6 +1226,8 @@ class DemStepper:
         self.neighbours.restore(state)
         self._reset_record()
         self._travel_bound = float(state["travel_bound"][0])
+        travel, steps = state.get("advance_travel", (0.0, 0))  # (absent from checkpoints before free flight)
+        self._advance_travel, self._advance_steps = float(travel), int(steps)
         self._refresh_damping()
         self._drag_set = False
         self.compute_forces()
@@ -1398,16 +1403,18 @@ class DemStepper:
             counts.declined += 1
             return False
         farthest = self._free_candidates(duration, fluid_velocity, nchunk)
-        # a list check inside the advance would undo it, and pairs off the list are trusted only as far as the skin
-        # less twice the travel bound: check (and rebuild) the list now if the sub-stepped droplets may travel as far
-        # as the last advance's did, or if the farthest-reaching droplet does not fit in what is left of the skin
-        limit = 0.5 * nl.skin - max(expected, farthest)
+        # a list check inside the advance would undo it: check (and rebuild) the list now if the sub-stepped
+        # droplets may travel as far as the last advance's did
+        limit = 0.5 * nl.skin - expected
         if self._travel_bound > limit:
             builds = nl.builds
             self._keep_list(fluid_velocity, impulse, max(limit, 0.0) / nl.skin)
             if nl.builds != builds:  # (perhaps re-sorted: the candidates' rows moved)
                 farthest = self._free_candidates(duration, fluid_velocity, nchunk)
-        free = self._free_pairs(duration, fluid_velocity, farthest)
+        # the sub-stepped droplets move at most their budgets, and at most what keeps the list valid (skin/2 less
+        # the travel bound: checked after the steps), whichever is less
+        valid = 0.5 * nl.skin - self._travel_bound
+        free = self._free_pairs(duration, fluid_velocity, min(farthest, valid))
         if free < FREE_FLIGHT_MIN_FRACTION * n:
             counts.declined += 1
             return False
@@ -1415,7 +1422,8 @@ class DemStepper:
         start_bound = self._travel_bound
         motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, impulse, self._deviation)
         self._travel_bound += integrate_initial(s.position, s.velocity, self.force, self.mass, motion, n, nchunk)
-        if not self._advance_half(steps, fluid_velocity, impulse, free=True):
+        if not self._advance_half(steps, fluid_velocity, impulse, free=True) or (
+                farthest > valid and self._travel_bound > 0.5 * nl.skin):
             counts.list_checks += 1
             self._restore_start(impulse)
             return False
@@ -1451,8 +1459,8 @@ class DemStepper:
                                       self._transient, self._reach)
 
     def _free_pairs(self, duration, fluid_velocity, farthest) -> int:
-        """Keep free the candidates that no list partner and no droplet off the list can reach
-        (:func:`free_flight_pairs`); returns how many."""
+        """Keep free the candidates that no list partner and no droplet off the list can reach if none moves
+        farther than ``farthest`` [m] (:func:`free_flight_pairs`); returns how many."""
         s, n, nl = self.store, self.store.count, self.neighbours
         # pairs off the list were at least a skin apart at its build and each droplet has since moved (or grown)
         # at most the travel bound

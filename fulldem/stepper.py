@@ -150,8 +150,8 @@ class Counters:
 class StepDiagnostics(dict):
     """Per-step numbers: max_cell_reynolds, max_cfl, max_overlap_ratio, pressure_iterations, feed_backlog,
     free_fraction (droplets advanced in one exact step instead of the DEM sub-steps, see fulldem.dem *Free flight*),
-    free_flight_breaches (fluid steps since the start whose DEM advance was redone with every droplet sub-stepped
-    because a sub-stepped droplet left its budget)..."""
+    free_flight_breaches (fluid steps since the simulation was built or resumed whose DEM advance was redone with
+    every droplet sub-stepped because a sub-stepped droplet left its budget)..."""
 
 
 class Simulation:

@@ -205,17 +205,21 @@ def test_a_list_check_inside_the_advance_redoes_it(monkeypatch):
 
 
 def test_a_droplet_that_outruns_the_skin_turns_free_flight_off():
-    """Pairs off the list are trusted only within the skin: a droplet crossing half the skin in one advance (here
-    0.5 m/s over 0.72 ms against a 0.1 mm skin) leaves no droplet free; the advance is sub-stepped as before."""
+    """A droplet crossing half the skin within an advance (0.5 m/s over 0.72 ms against a 0.1 mm skin) forces a
+    list check inside it: the free-flight advance is undone and sub-stepped (bit for bit the sub-steps' result),
+    and the next advance, expecting the same, is sub-stepped from the start."""
     position, diameter, velocity, fluid = _dilute(seed=4, n=64)
     velocity[0] = fluid[0] = (0.5, 0.0, 0.0)
     position[0] = (0.004, 0.0035, 0.0035)
     free, stepper, impulse_free = _run(position, diameter, velocity, fluid, True)
     stepped, other, impulse_stepped = _run(position, diameter, velocity, fluid, False)
-    assert stepper.free_flight_counts.declined == 1 and stepper.free_flight_counts.advances == 0
+    counts = stepper.free_flight_counts
+    assert counts.list_checks == 1 and counts.advances == 0
     assert other.neighbours.builds == stepper.neighbours.builds > 1
     np.testing.assert_array_equal(free.position[:64], stepped.position[:64])
     np.testing.assert_array_equal(impulse_free, impulse_stepped)
+    stepper.advance(STEPS, fluid, impulse_free)
+    assert counts.declined == 1 and counts.list_checks == 1 and counts.advances == 0
 
 
 def test_settling_bed_has_no_breach():
