@@ -10,7 +10,9 @@ One fluid step of length dt, from droplets at x^n and fluid (u^n, p^n):
    V_p interp(-grad p^{n+1} + b); its drag coefficient beta (Schiller-Naumann, Di Felice hindrance, corrected for
    its own disturbance) is computed from them;
 5. DEM sub-steps of length dt/n_sub integrate contacts, buoyant weight, pressure force and the drag (exactly, with
-   the exponential integrator), accumulating each droplet's drag impulse J;
+   the exponential integrator), accumulating each droplet's drag impulse J; droplets that touch nothing over the
+   fluid step skip the sub-steps and move in one exact step (free flight, :mod:`fulldem.dem`; ``self.dem.free_flight
+   = False`` sub-steps every droplet, for comparison);
 6. -J is deposited at x^n as the face force the fluid receives in the next step (so it is owed, not lost);
 7. droplets touching the bottom are removed as *settled*, those leaving by the outlet as *lost*.
 
@@ -146,7 +148,10 @@ class Counters:
 
 
 class StepDiagnostics(dict):
-    """Per-step numbers: max_cell_reynolds, max_cfl, max_overlap_ratio, pressure_iterations, feed_backlog..."""
+    """Per-step numbers: max_cell_reynolds, max_cfl, max_overlap_ratio, pressure_iterations, feed_backlog,
+    free_fraction (droplets advanced in one exact step instead of the DEM sub-steps, see fulldem.dem *Free flight*),
+    free_flight_breaches (fluid steps since the simulation was built or resumed whose DEM advance was redone with
+    every droplet sub-stepped because a sub-stepped droplet left its budget)..."""
 
 
 class Simulation:
@@ -506,7 +511,8 @@ class Simulation:
         self.apply_events()
         self.last = StepDiagnostics(max_cell_reynolds=fdiag.cell_reynolds, max_cfl=fdiag.courant,
                                     max_overlap_ratio=worst, pressure_iterations=fdiag.pressure_iterations,
-                                    feed_backlog=len(self.backlog))
+                                    feed_backlog=len(self.backlog), free_fraction=self.dem.last_free_fraction,
+                                    free_flight_breaches=self.dem.free_flight_counts.breaches)
         if not np.isfinite(s.position[: s.count]).all() or not np.isfinite(state.u).all():
             raise FloatingPointError(f"non-finite state at t = {self.time:.6g} s")
         if worst > fd.overlap_abort:
