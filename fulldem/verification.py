@@ -1,6 +1,6 @@
 """Set-ups of the collective-settling verification cases, shared by tests/test_fulldem_verification.py,
-reports/fulldem_verification.py (runs them all and writes reports/fulldem_verification.md) and
-reports/fulldem_falling_cloud.py (the picture of a cloud turning into a torus).
+analysis/verification.py (one row per check, measured against its reference) and the verification report
+(reports/verification.py, `settler report verification`, which also draws a cloud turning into a torus).
 
 * Hindered settling: an initially uniform random suspension of monodisperse droplets fills the lower part of a box,
   periodic in x and y, walls in z (closed top and bottom, so the mixture's volume flux is zero); the height with

@@ -13,7 +13,7 @@ For a size class settling at u [m/s] through a slag layer of height H [m] with s
   over [0, t_f], eta = clip((tau - H/u) / t_f, 0, 1), a sharp cut at u = H / tau (top entry, not spread).
 
 Without coalescence and hindering the model reproduces the last two up to its numerical diffusion; the tests and
-reports/popbal_paper_cases.py compare them.
+the verification report (reports/verification.py) compare them.
 """
 
 from __future__ import annotations

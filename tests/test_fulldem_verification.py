@@ -13,7 +13,8 @@ Default tier: phi = 0.1 and N a/R = 4 (about a minute together on 2 cores). Slow
 in a larger box, N a/R = 2 ... 10, and a finer grid and a larger box for the cloud. The numbers, the commands and the
 discussion (why the front runs a few % ahead of the bulk; why the cloud falls 12 % below the reference at R = 4
 cells: the smoothing kernel) are in reports/fulldem_verification.md. The set-up functions are shared with
-reports/fulldem_falling_cloud.py, which draws the cloud turning into a torus.
+the verification report (reports/verification.py, through analysis/verification.py), which also draws the cloud
+turning into a torus.
 """
 
 from __future__ import annotations
