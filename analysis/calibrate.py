@@ -76,15 +76,20 @@ PARAMETERS: dict[str, tuple[float, float, str]] = {
     "feed_layer_thickness": (1e-3, 0.05, "m"),
     "feed_layer_coefficient": (1e-5, 10.0, "-"),
     "axis_velocity_ratio": (0.2, 5.0, "-"),
+    "plume_reynolds_scale": (1e-2, 100.0, "-"),
 }
+#: Bounds that replace PARAMETERS' under a channel_radius_form (fixed with --fix popbal.channel_radius_form=...):
+#: the 'flux' form's factor is phi_p^(-1/2) of a plume volume fraction phi_p in 0.0025 ... 4.
+FORM_BOUNDS = {"flux": {"channel_radius_factor": (0.5, 20.0)}}
 DEFAULT_PARAMETERS = ("collision_efficiency", "channel_coefficient", "channel_radius_factor", "shear_coefficient",
                       "feed_layer_thickness", "feed_layer_coefficient", "axis_velocity_ratio")
 #: Start values of keys a reference case leaves absent (the feed-layer keys are optional: absent = no layer).
-START_VALUES = {"feed_layer_thickness": 0.01, "feed_layer_coefficient": 0.03, "axis_velocity_ratio": 1.0}
+START_VALUES = {"feed_layer_thickness": 0.01, "feed_layer_coefficient": 0.03, "axis_velocity_ratio": 1.0,
+                "plume_reynolds_scale": 3.0}
 
 #: Steady part of each reference run [s] (read off data/reference/<case>/timeseries.csv): simple: the count levels
 #: off at ~13 s; cubic: ~14 s; deep: the count levels off at ~32 s and the first droplets settle at ~46 s.
-STEADY_WINDOWS = {"simple": (15.0, 30.0), "cubic": (15.0, 30.0), "deep": (35.0, 60.0)}
+STEADY_WINDOWS = {"simple": (15.0, 30.0), "cubic": (14.0, 25.0), "deep": (35.0, 60.0)}
 BLOCK = 1.0  # s
 SIGMA_FLOOR = 0.01  # x |window mean|
 #: Identifiability flags: |correlation| above, relative standard error above, singular value ratio below.
@@ -285,21 +290,23 @@ class Calibration:
         return "\n".join(lines)
 
 
-def _bounds(parameters):
+def _bounds(parameters, fixed: dict | None = None):
+    """(low, high) arrays of the fitted keys: PARAMETERS' bounds, or FORM_BOUNDS' under a fixed channel_radius_form."""
     unknown = [p for p in parameters if p not in PARAMETERS]
     if unknown or not parameters:
         raise CalibrationError(f"--params {','.join(parameters)!r}: unknown {', '.join(unknown) or '(none given)'}; "
                                f"allowed: a comma-separated list of {', '.join(PARAMETERS)}")
-    low = np.array([PARAMETERS[p][0] for p in parameters])
-    high = np.array([PARAMETERS[p][1] for p in parameters])
+    form = FORM_BOUNDS.get(str((fixed or {}).get("popbal.channel_radius_form", "inlet")), {})
+    low = np.array([form.get(p, PARAMETERS[p])[0] for p in parameters])
+    high = np.array([form.get(p, PARAMETERS[p])[1] for p in parameters])
     return low, high
 
 
-def start_values(reference: Reference, parameters, start: dict | None = None) -> np.ndarray:
+def start_values(reference: Reference, parameters, start: dict | None = None, fixed: dict | None = None) -> np.ndarray:
     """Start of the fit: ``start`` where given, else the reference case's own value, else :data:`START_VALUES`;
     clipped into the bounds."""
     case = load_case(reference.case_file)
-    low, high = _bounds(parameters)
+    low, high = _bounds(parameters, fixed)
     x0 = []
     for name in parameters:
         value = (start or {}).get(name, getattr(case.popbal, name))
@@ -324,12 +331,12 @@ def calibrate(cases=("simple",), holdout: str | None = "deep", parameters=DEFAUL
     if bad or not columns:
         raise CalibrationError(f"--columns {','.join(columns)!r}: allowed: a comma-separated list of "
                                f"{', '.join(COLUMNS)}")
-    low, high = _bounds(parameters)
+    low, high = _bounds(parameters, fixed)
     if holdout is not None and holdout in cases:
         raise CalibrationError(f"--holdout {holdout}: also in --cases {','.join(cases)}; allowed: a case not fitted")
     windows = windows or {}
     references = [load_reference(c, reference_dir, windows.get(c), block) for c in cases]
-    x0 = start_values(references[0], parameters, start)
+    x0 = start_values(references[0], parameters, start, fixed)
     evaluations = {"n": 0}
     bar = _progress(max_evaluations, progress)
 
@@ -596,6 +603,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"block length [s] over which residuals are averaged; default {BLOCK:g}")
     parser.add_argument("--fix", action="append", metavar="popbal.KEY=VALUE", default=[],
                         help="a case override applied to every run and not fitted (repeatable)")
+    parser.add_argument("--start", action="append", metavar="KEY=VALUE", default=[],
+                        help="start value of a fitted [popbal] key (repeatable); default: the first fitted case's "
+                             "own value, else a built-in start")
     parser.add_argument("--max-evaluations", type=int, default=200,
                         help="largest number of reduced-model runs of the least-squares fit; default 200")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -612,10 +622,11 @@ def main(args) -> int:
     out = prepare_output_folder(args.out, overwrite=args.overwrite) if args.out else None
     holdout = None if args.holdout.lower() in ("none", "") else args.holdout
     fixed = dict(parse_override(f) for f in args.fix)
+    start = {k.removeprefix("popbal."): float(v) for k, v in (parse_override(f) for f in args.start)}
     try:
         result = calibrate(cases=_names(args.cases), holdout=holdout, parameters=_names(args.params),
                            columns=_names(args.columns), reference_dir=args.reference_dir,
-                           windows=_windows(args.steady), block=args.block, fixed=fixed,
+                           windows=_windows(args.steady), block=args.block, fixed=fixed, start=start,
                            max_evaluations=args.max_evaluations, progress=not args.quiet)
     except CalibrationError as exc:
         raise OutputError(str(exc)) from None

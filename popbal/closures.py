@@ -47,6 +47,37 @@ on the centreline against 86 mm/s of slag), as droplets spread over a plume whos
 u_c is the velocity of the droplet-laden cloud (what moves the droplets); the reduced model reports the axis
 velocity as ``axis_velocity_ratio`` x u_c (plus the downflow), a calibrated ratio (1: the old form).
 
+Channel radius from the feed's volume flux (issue 13, second round; ``channel_radius_form = "flux"``). The full
+runs' channel does not scale with the inlet: at mid-height over the steady windows (data/reference/<case>/
+channel_profile.csv) the half-volume radius is 72 mm in simple and 73 mm in cubic (75 mm inlet radius) but 3.0 mm in
+deep (10 mm inlet radius), 0.96 and 0.30 inlet radii. What does scale across the three runs is the plume velocity:
+the slag runs down the axis at 89.6 mm/s (simple), 101.9 mm/s (cubic) and 12.5 mm/s (deep), and u_s =
+sqrt(c Q drho g / (pi mu)) reproduces the simple/deep ratio 7.2 with the feeds' Q drho (ratio 7.5-8.5 with deep's
+matte at 4500-5200 kg/m^3) and c = 0.35-0.39 in both, although Q differs 57-fold: the plume law holds, the inlet
+size does not enter it. Continuity then sets the radius that carries Q at u_s with a plume volume fraction phi_p,
+pi R_c^2 u_s phi_p = Q_ch, so
+
+    R_c = k_R sqrt(Q_ch / (pi u_s)) [m],  k_R = channel_radius_factor = phi_p^(-1/2) [-],
+    u_s = sqrt(c_ch Q_ch drho g / (pi mu)) [m/s]  ->  R_c = k_R (Q_ch mu / (pi c_ch drho g))^(1/4),
+
+R_c proportional to Q^(1/4) and independent of the inlet: 2.4 mm (simple, cubic) and 1.0 mm (deep) per unit k_R at
+c_ch = 0.37. The full runs' narrowest section of the plume (simple: 12 mm, 30 mm under the roof; deep: 2.9 mm) is
+about 5 and 3 of these units, phi_p = 0.04-0.1. Below the neck the simple and cubic runs spread their droplets over
+the whole box (a uniform spread would give 80 mm), deep's stay within 3 mm of the axis: no radius law of a single
+plume gives both, which is why the channel_radius column is reported but not a target.
+
+Droplet transport and the plume Reynolds number (``plume_reynolds_scale`` Re_c). The droplets of the full runs do
+not all ride the plume at u_s: on the centreline they move at 0.41 (simple), 0.44 (cubic) and 0.91 (deep) of the
+slag's axis velocity. The plume Reynolds number Re = rho_s u_s R_c / mu is ~7 in simple and cubic (with the neck
+radius; the runs' count bursts every ~5 s and the spread over the box are those of an unsteady plume) and ~0.3 in
+deep (a steady Stokes plume). The closure: the channel zone's droplets move collectively at u_s / (1 + Re/Re_c)
+(a dispersion of the plume's droplets into the return flow that grows with the plume's inertia), implemented by
+giving the plume cells the coefficient c_ch / (1 + Re/Re_c)^2 in the local cloud law (its steady solution is then
+u_s / (1 + Re/Re_c)) and reporting the axis velocity as axis_velocity_ratio x (1 + Re/Re_c) x that velocity, i.e.
+u_s itself (axis_velocity_ratio absent = 1). Re_c is a fitted constant; the simple and cubic cases share their
+feed and so their Re: fitted on those two alone, Re_c and c_ch are not separable, and only a fit including deep
+determines it (analysis.calibrate reports this).
+
 Not modelled (calibration will tell whether they matter): the return flow of slag in the outer zone and the
 exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel, and, in the
 simple case's lower half, carries them out of the slag jet), the cloud's break-up, and inertia of the plume
@@ -105,3 +136,15 @@ def cloud_profile(z, height, channel_radius, channel_coefficient, layer_thicknes
         coefficient[layer] = layer_coefficient
         radius[layer] = layer_thickness
     return coefficient, radius
+
+
+def flux_channel_radius(volume_flux, velocity, radius_factor):
+    """The 'flux' form's channel radius R_c = k_R sqrt(Q_ch / (pi u_s)) [m] for Q_ch [m^3/s] carried at u_s [m/s]
+    (continuity at the plume volume fraction 1 / k_R^2); 0 without flux."""
+    return radius_factor * math.sqrt(volume_flux / (math.pi * velocity)) if volume_flux > 0.0 and velocity > 0.0 \
+        else 0.0
+
+
+def transport_factor(reynolds, reynolds_scale=None):
+    """Droplet transport velocity / the plume's u_s [-]: 1 / (1 + Re / Re_c); 1 when Re_c is None."""
+    return 1.0 / (1.0 + reynolds / reynolds_scale) if reynolds_scale else 1.0

@@ -105,7 +105,7 @@ def build(case: Case) -> Model:
     g, p, f, c = case.geometry, case.popbal, case.feed, case.coalescence
     box_area = g.width * g.depth
     inlet_radius = 0.5 * g.inlet_diameter
-    channel_radius = p.channel_radius_factor * inlet_radius
+    channel_radius, plume_velocity, reynolds, transport = channel_closure(case)
     channel_area = math.pi * channel_radius**2
     if channel_area >= box_area:
         raise CaseError(f"popbal.channel_radius_factor = {p.channel_radius_factor!r}: the channel (radius "
@@ -132,7 +132,9 @@ def build(case: Case) -> Model:
     cells = p.height_cells
     dz = g.height / cells
     z = (np.arange(cells) + 0.5) * dz
-    cloud_coefficient, cloud_radius = closures.cloud_profile(z, g.height, channel_radius, p.channel_coefficient,
+    # the droplets' cloud law in the plume carries them at transport x u_s (steady), so its coefficient is c_ch x t^2
+    plume_coefficient = p.channel_coefficient * transport**2
+    cloud_coefficient, cloud_radius = closures.cloud_profile(z, g.height, channel_radius, plume_coefficient,
                                                              p.feed_layer_thickness, p.feed_layer_coefficient)
 
     # slag: residence time, and in 'vertical' flow a downflow that the outlet band withdraws
@@ -194,9 +196,13 @@ def build(case: Case) -> Model:
         "efficiency": p.collision_efficiency,
         "interfacial_tension": case.matte.interfacial_tension,
         "hindered_exponent": p.hindered_exponent,
-        "channel_coefficient": p.channel_coefficient,
+        "channel_coefficient": plume_coefficient,
         "shear_coefficient": p.shear_coefficient,
-        "axis_velocity_ratio": 1.0 if p.axis_velocity_ratio is None else p.axis_velocity_ratio,
+        # the slag on the axis runs at u_s, the droplets' cloud at transport x u_s
+        "axis_velocity_ratio": (1.0 if p.axis_velocity_ratio is None else p.axis_velocity_ratio) / transport,
+        "plume_velocity": plume_velocity,
+        "plume_reynolds": reynolds,
+        "transport_factor": transport,
         "max_courant": p.max_courant,
         "time_step": p.time_step,
         "output_interval": p.output_interval,
@@ -213,6 +219,26 @@ def build(case: Case) -> Model:
                  horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
                  viscosity=case.slag_viscosity, cloud_coefficient=cloud_coefficient, cloud_radius=cloud_radius,
                  parameters=parameters)
+
+
+def channel_closure(case: Case) -> tuple[float, float, float, float]:
+    """(R_c [m], u_s [m/s], Re [-], transport factor [-]) of the case's channel (popbal.closures).
+
+    R_c: channel_radius_factor inlet radii ('inlet' form, the default) or channel_radius_factor sqrt(Q_ch / (pi u_s))
+    ('flux'); u_s = sqrt(c_ch Q_ch drho g / (pi mu)) the steady plume velocity of the matte feed Q_ch [m^3/s] that
+    enters the channel; Re = rho_s u_s R_c / mu; transport factor 1 / (1 + Re / plume_reynolds_scale) (1 without).
+    """
+    p, g = case.popbal, case.geometry
+    volume_flux = case.feed.mass_rate * p.channel_feed_fraction / case.matte.density
+    excess = case.matte.density - case.slag.density
+    velocity = closures.steady_channel_velocity(volume_flux, excess, case.slag_viscosity, p.channel_coefficient) \
+        if volume_flux > 0.0 and excess > 0.0 else 0.0
+    if p.channel_radius_form == "flux":
+        radius = closures.flux_channel_radius(volume_flux, velocity, p.channel_radius_factor)
+    else:
+        radius = p.channel_radius_factor * 0.5 * g.inlet_diameter
+    reynolds = closures.plume_reynolds(velocity, radius, case.slag.density, case.slag_viscosity)
+    return radius, velocity, reynolds, closures.transport_factor(reynolds, p.plume_reynolds_scale)
 
 
 def check_size(case: Case, volume_min: float, volume_top: float) -> dict[str, float]:
@@ -298,6 +324,11 @@ def start_up_numbers(model: Model) -> list[Quantity]:
             Quantity("steady channel volume fraction", phi, "-", "Q_ch / (pi R_c^2 u_c)"),
             Quantity("plume Reynolds number", closures.plume_reynolds(u_c, model.channel_radius, case.slag.density,
                                                                       model.viscosity), "-", "rho_s u_c R_c / mu"),
+            Quantity("plume slag velocity u_s", model.parameters["plume_velocity"], "m/s",
+                     "sqrt(c_ch Q_ch drho g / (pi mu)) with the case's c_ch; u_c = transport factor x u_s"),
+            Quantity("plume Reynolds number of u_s", model.parameters["plume_reynolds"], "-", "rho_s u_s R_c / mu"),
+            Quantity("droplet transport factor", model.parameters["transport_factor"], "-",
+                     "1 / (1 + Re / popbal.plume_reynolds_scale); 1 without"),
             Quantity("feed layer velocity u_L (steady, dilute)", _layer_velocity(model, q_channel, excess), "m/s",
                      "sqrt(c_L j drho g / mu) delta, j = Q_ch / (pi R_c^2); nan without a feed layer"),
             Quantity("channel shear rate G", model.parameters["shear_coefficient"] * u_c / model.channel_radius,

@@ -232,6 +232,15 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "axis_velocity_ratio": Field(F, "-", "Slag velocity on the channel axis (the channel_velocity output) / the "
                                              "plume velocity u_c that carries the droplets; absent: 1.", 0.0,
                                      exclusive_minimum=True, optional=True),
+        "channel_radius_form": Field(S, "", "How the channel radius R_c is set (popbal.closures): 'inlet' "
+                                            "(channel_radius_factor inlet radii) or 'flux' (channel_radius_factor x "
+                                            "sqrt(Q_ch / (pi u_s)): continuity at a fixed plume volume fraction "
+                                            "1 / factor^2, u_s the steady plume velocity); absent: 'inlet'.",
+                                     choices=("inlet", "flux"), optional=True),
+        "plume_reynolds_scale": Field(F, "-", "Re_c: the droplets ride the plume at u_s / (1 + Re / Re_c), Re = "
+                                              "rho_s u_s R_c / mu the plume Reynolds number, while the channel_velocity "
+                                              "output stays the slag's u_s (popbal.closures); absent: no such "
+                                              "reduction.", 0.0, exclusive_minimum=True, optional=True),
     },
 }
 del F, I, B, S, L

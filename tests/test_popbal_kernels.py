@@ -193,7 +193,7 @@ def test_cloud_coefficient_is_hadamard_rybczynski_and_the_falling_cloud():
 
 
 def test_model_channel_reaches_the_steady_plume_velocity():
-    model = popbal.setup("simple", {"coalescence.enabled": False, "popbal.end_time": 10.0,
+    model = popbal.setup("simple", {"case.calibration": "none", "coalescence.enabled": False, "popbal.end_time": 10.0,
                                     "popbal.output_interval": 10.0})
     result = popbal.run(model)
     expected = popbal.steady_channel_velocity(model.case.feed.mass_rate / model.feed_density,

@@ -1,0 +1,77 @@
+"""popbal's 'flux' channel closure (popbal.closures, issue 13): the radius carries the feed at the plume volume
+fraction 1 / k_R^2 (continuity), scales as Q^(1/4) and not with the inlet, and a run's steady axis velocity is the
+analytic plume velocity u_s = sqrt(c Q drho g / (pi mu)) whether or not the droplets ride it at a reduced speed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import popbal
+from popbal import closures
+from popbal.model import channel_closure
+from settler.cases import load_case
+from settler.physics import STANDARD_GRAVITY
+
+#: The simple case's feed: Q = 0.0086 / 5100 m^3/s, drho = 1950 kg/m^3, mu = 0.45 Pa s, rho_s = 3150 kg/m^3.
+Q, DRHO, MU, RHO_S = 0.0086 / 5100.0, 1950.0, 0.45, 3150.0
+
+
+def test_flux_radius_holds_the_feed_at_the_plume_fraction():
+    """pi R^2 u phi = Q with phi = 1 / k_R^2 to round-off, and R ~ Q^(1/4) (u ~ Q^(1/2)) for a 57-fold feed range."""
+    c, k = 0.37, 5.0
+    for q in (Q, Q / 57.0):
+        u = closures.steady_channel_velocity(q, DRHO, MU, c)
+        r = closures.flux_channel_radius(q, u, k)
+        assert closures.steady_channel_fraction(q, r, u) == pytest.approx(1.0 / k**2, rel=1e-12)
+        # closed form R = k (Q mu / (pi c drho g))^(1/4)
+        assert r == pytest.approx(k * (q * MU / (math.pi * c * DRHO * STANDARD_GRAVITY)) ** 0.25, rel=1e-12)
+    u1, u2 = (closures.steady_channel_velocity(q, DRHO, MU, c) for q in (Q, Q / 57.0))
+    r1, r2 = closures.flux_channel_radius(Q, u1, k), closures.flux_channel_radius(Q / 57.0, u2, k)
+    assert r1 / r2 == pytest.approx(57.0**0.25, rel=1e-12)
+    assert closures.flux_channel_radius(0.0, 0.0, k) == 0.0
+
+
+def test_transport_factor():
+    """1 / (1 + Re / Re_c): 1/2 at Re = Re_c, 1 without a scale."""
+    assert closures.transport_factor(2.0, 2.0) == 0.5
+    assert closures.transport_factor(7.0, None) == 1.0
+
+
+def test_case_closure_by_hand():
+    """The simple case with the 'flux' form: u_s, R_c and Re against the numbers computed by hand (c = 0.37, k = 5:
+    u_s = sqrt(0.37 x 1.686e-6 x 1950 x 9.80665 / (pi 0.45)) = 91.9 mm/s, R_c = 5 sqrt(Q / (pi u_s)) = 12.1 mm,
+    Re = 3150 x 0.0919 x 0.0121 / 0.45 = 7.77); the inlet form keeps R_c = k x 75 mm whatever the feed."""
+    case = load_case("simple", {"case.calibration": "none", "popbal.channel_radius_form": "flux",
+                                "popbal.channel_coefficient": 0.37, "popbal.channel_radius_factor": 5.0,
+                                "popbal.plume_reynolds_scale": 2.0})
+    radius, velocity, reynolds, transport = channel_closure(case)
+    assert velocity == pytest.approx(0.0919, rel=2e-3)
+    assert radius == pytest.approx(0.0121, rel=5e-3)
+    assert reynolds == pytest.approx(7.77, rel=1e-2)
+    assert transport == pytest.approx(1.0 / (1.0 + reynolds / 2.0), rel=1e-12)
+    inlet = load_case("simple", {"case.calibration": "none", "popbal.channel_radius_factor": 0.5,
+                                 "feed.mass_rate": 0.001})
+    assert channel_closure(inlet)[0] == pytest.approx(0.5 * 0.075, rel=1e-12)
+
+
+@pytest.mark.parametrize("reynolds_scale", [None, 7.77])
+def test_steady_axis_velocity_is_the_plume_velocity(reynolds_scale):
+    """Coalescence off, 'flux' form: the channel_velocity output at mid-height over 8-12 s is u_s within 5 %, with
+    the droplets carried at u_s (Re_c absent) or at u_s / (1 + Re / Re_c) = u_s / 2 (Re_c = Re = 7.77: then the
+    plume holds twice the matte and the output still reports the slag's u_s)."""
+    overrides = {"case.calibration": "none", "coalescence.enabled": False, "popbal.channel_radius_form": "flux",
+                 "popbal.channel_coefficient": 0.37, "popbal.channel_radius_factor": 5.0,
+                 "popbal.end_time": 12.0, "popbal.output_interval": 0.5, "popbal.height_cells": 25,
+                 "popbal.sections_per_doubling": 1}
+    if reynolds_scale is not None:
+        overrides["popbal.plume_reynolds_scale"] = reynolds_scale
+    case = load_case("simple", overrides)
+    _, u_s, _, transport = channel_closure(case)
+    series = popbal.run(popbal.setup(case), progress=False).timeseries
+    steady = series[(series["time"] >= 8.0) & (series["time"] <= 12.0)]
+    assert np.mean(steady["channel_velocity"]) == pytest.approx(u_s, rel=0.05)
+    if reynolds_scale is not None:
+        assert transport == pytest.approx(0.5, rel=0.01)
