@@ -180,3 +180,99 @@ def test_merges_in_a_cloud_conserve_momentum_and_matte_and_repeat_exactly():
     assert two.counters.merges == one.counters.merges
     for name in ("position", "velocity", "diameter", "contact_diameter", "flags", "partner", "ident"):
         assert np.array_equal(getattr(two.store, name)[: two.store.count], getattr(s, name)[: s.count]), name
+
+
+# -- marked partners: no force between them, every other droplet still feels both
+_SIZES = (1.0e-3, 0.8e-3, 0.6e-3)  # A, B, C [m]
+
+
+def _triangle():
+    """Centres [m] of A, B, C: A and B overlap by 10 % of their mean diameter, C overlaps each by 5 %."""
+    d_a, d_b, d_c = _SIZES
+    ab, ac, bc = 0.90 * (d_a + d_b) / 2, 0.95 * (d_a + d_c) / 2, 0.95 * (d_b + d_c) / 2
+    x = (ac**2 - bc**2 + ab**2) / (2 * ab)  # C's foot on the A-B line, from A
+    centre = np.array([2e-3, 2e-3, 2e-3])
+    return centre + np.array([[0.0, 0.0, 0.0], [ab, 0.0, 0.0], [x, math.sqrt(ac**2 - x**2), 0.0]])
+
+
+def _forces(which, half, marked=False):
+    """Contact forces [N] (k, 3) on the droplets ``which`` (indices into A, B, C) placed as in :func:`_triangle`,
+    at rest (no dashpot force), from a DemStepper's force pass; A and B marked as partners if ``marked``."""
+    store = DropletStore(8)
+    store.add(_triangle()[list(which)], np.array(_SIZES)[list(which)], 5000.0)
+    if marked:
+        store.mark_pairs([0], [1])
+    stepper = dem.DemStepper(store, (0, 0, 0), (6e-3,) * 3, (False, False, False), 1e-5, 5.0, 0.5e-3, 0.5, 0.2e-3,
+                             (0, 0, 0), half_list=half, sort_on_rebuild=False)
+    stepper.droplets_changed()
+    stepper.compute_forces()
+    return stepper.force[: store.count].copy()
+
+
+@pytest.mark.parametrize("half", [True, False], ids=["half_list", "full_list"])
+def test_marked_droplets_overlap_without_force_while_a_third_feels_both(half):
+    """A and B (1.0 and 0.8 mm) overlap by 10 % and are marked partners; C (0.6 mm) overlaps each by 5 %. Reference:
+    the same positions as the separate pairs (A, C), (B, C), (A, B). A feels only C, exactly as in (A, C) alone; B
+    only C, as in (B, C); C the sum of both pairs (tolerance: round-off of summing two forces, 1e-12 of the
+    largest). Unmarked, the A-B pair pushes with the (A, B) pair's force, so the marking is what removes it."""
+    a_c, b_c, a_b = _forces((0, 2), half), _forces((1, 2), half), _forces((0, 1), half)
+    # the pair references by hand, k_ref (d_small / d_ref)^2 x overlap with k_ref = 5 N/m at d_ref = 0.5 mm; the
+    # force a marking must remove, (A, B)'s, is 4 times (A, C)'s
+    for pair, small, overlap in ((a_b, 0.8e-3, 0.10 * 0.9e-3), (a_c, 0.6e-3, 0.05 * 0.8e-3),
+                                 (b_c, 0.6e-3, 0.05 * 0.7e-3)):
+        assert np.linalg.norm(pair[0]) == pytest.approx(5.0 * (small / 0.5e-3) ** 2 * overlap, rel=1e-12)
+    scale = float(np.linalg.norm(a_b[0]))
+    marked = _forces((0, 1, 2), half, marked=True)
+    np.testing.assert_allclose(marked[0], a_c[0], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(marked[1], b_c[0], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(marked[2], a_c[1] + b_c[1], rtol=0, atol=1e-12 * scale)
+    free = _forces((0, 1, 2), half)
+    np.testing.assert_allclose(free[0], a_c[0] + a_b[0], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(free[1], b_c[0] + a_b[1], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(free[2], marked[2], rtol=0, atol=1e-12 * scale)
+
+
+def _free_flight_run(marked):
+    """27 droplets of 0.5 mm, 1.5 mm apart on a lattice, drifting at random up to 5 mm/s with drag, plus two pairs
+    (2, 3) overlapping by 10 % and (4, 5) 0.3 mm apart at rest, marked as partners if ``marked``: one 2 ms advance
+    of 36 steps with free flight. Returns the stepper."""
+    rng = np.random.default_rng(11)
+    d = 0.5e-3
+    lattice = np.stack(np.meshgrid(*(np.arange(3),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    position = 1.5e-3 * (lattice + 1.0)
+    position[3] = position[2] + [0.9 * d, 0.0, 0.0]
+    position[5] = position[4] + [d + 0.3e-3, 0.0, 0.0]
+    velocity = rng.uniform(-5e-3, 5e-3, (27, 3))
+    velocity[2:6] = 0.0
+    store = DropletStore(64)
+    store.add(position, d, 5000.0, velocity=velocity)
+    if marked:
+        store.mark_pairs([2, 4], [3, 5])
+    stepper = dem.DemStepper(store, (0, 0, 0), (6e-3,) * 3, (False, False, False), 2e-3 / 36, 2.5, d, 0.3, 0.2e-3,
+                             (0, 0, 0), sort_on_rebuild=False)
+    stepper.droplets_changed()
+    beta = np.full(store.capacity, 3 * math.pi * 0.3 * d)  # Stokes drag in a 0.3 Pa s slag [kg/s]
+    stepper.set_drag(beta)
+    stepper.advance(36, np.zeros((1, 3)), dem.NO_IMPULSE)
+    return stepper
+
+
+def test_free_flight_never_takes_marked_partners():
+    """Free flight (droplets touching nothing skip the sub-steps) must leave marked droplets to the sub-steps: a
+    partner pair grows and is drawn together at the event point, which no free-flight budget covers. Unmarked, the
+    pair 0.3 mm apart flies free (nothing is near it), so its exclusion when marked is the marking's doing; the pair
+    overlapping by 10 % is sub-stepped either way (unmarked it pushes apart; marked it stays at rest, untouched)."""
+    plain = _free_flight_run(marked=False)
+    free = (plain._free_flags[:27] & dem.FREE_FLIGHT) != 0
+    assert plain.free_flight_counts.advances == 1
+    assert free[4] and free[5] and not free[2] and not free[3]
+    stepper = _free_flight_run(marked=True)
+    flags = stepper._free_flags[:27]
+    assert stepper.free_flight_counts.advances == 1 and stepper.free_flight_counts.breaches == 0
+    assert not ((flags & dem.FREE_FLIGHT) != 0)[2:6].any()
+    assert ((flags & dem.FREE_FLIGHT) != 0).sum() == free.sum() - 2  # the other droplets as before
+    s = stepper.store
+    np.testing.assert_array_equal(s.velocity[2:6], 0.0)  # no force between partners, nothing else near
+    np.testing.assert_allclose(s.position[3] - s.position[2], [0.9 * 0.5e-3, 0.0, 0.0], rtol=0, atol=1e-18)
+    # the unmarked overlapping pair did push apart
+    assert np.linalg.norm(plain.store.position[3] - plain.store.position[2]) > 0.9 * 0.5e-3 * (1 + 1e-6)
