@@ -59,6 +59,100 @@ AGE_CAP_TIME_CONSTANTS = 50.0
 
 
 # ------------------------------------------------------------------------------------------------- coalescence
+# Why pair lists: in a furnace column most of a cell's K sections hold (next to) nothing most of the time, and the
+# step rule zeroes many of the remaining pairs, so the K (K + 1) / 2 pair loop mostly skips. collision_pairs lists,
+# once per cell and step, the pairs that can merge (both sections occupied, beta > 0), in the (j, k) order of the
+# full loop; pair_rates and largest_death_rate then visit only those, across every sub-step. Skipped pairs
+# contributed exact zeros, and the list keeps the order of every non-zero term, so results are bit-identical to
+# the full loops (cell_average_rates, collision_kernel, which the NumPy twins check).
+@njit(cache=True)
+def redistribute_births(pivots, births, rates, carried):
+    """Add the cell-average births (number B_i, volume V_i, carried quantities, collected in births (Q + 1, K)) to
+    rates (Q, K): vbar = V_i / B_i [m^3] is split between pivot i and its neighbour on vbar's side so that number
+    and volume are conserved; carried quantities follow the volume. Rows q >= carried are zero and left alone."""
+    n_k = pivots.size
+    for i in range(n_k):
+        b = births[0, i]
+        if b <= 0.0:
+            continue
+        vbar = births[1, i] / b
+        if not vbar > 0.0:
+            vbar = pivots[i]  # the volume underflowed (denormal birth rates in a far tail): keep it on the pivot
+        neighbour = i + 1 if vbar >= pivots[i] else i - 1
+        if neighbour < 0 or neighbour >= n_k:
+            # vbar beyond an end pivot only by round-off: keep the volume on pivot i
+            rates[NUMBER, i] += births[1, i] / pivots[i]
+            for q in range(1, carried):
+                rates[q, i] += births[q + 1, i]
+            continue
+        a = (pivots[neighbour] - vbar) / (pivots[neighbour] - pivots[i])
+        rates[NUMBER, i] += a * b
+        rates[NUMBER, neighbour] += (1.0 - a) * b
+        share = a * pivots[i] / vbar
+        for q in range(1, carried):
+            rates[q, i] += share * births[q + 1, i]
+            rates[q, neighbour] += (1.0 - share) * births[q + 1, i]
+
+
+@njit(cache=True)
+def pair_rates(content, pivots, pair_j, pair_k, pair_target, pair_beta, pairs, carried, births, rates):
+    """Coalescence rates of one cell by the cell-average technique over a pair list (see :func:`collision_pairs`).
+
+    content (Q, K); pair_j, pair_k, pair_target (P,) int64 and pair_beta (P,) [m^3/s]: the first ``pairs`` entries
+    are the merging pairs j <= k, the cell their merger lands in and the kernel beta_jk. Rows q >= carried of
+    content are zero (e.g. FES_REMOVED without reaction) and are skipped. births (Q + 1, K) is work space; writes
+    d content/dt into rates (Q, K). Otherwise as :func:`cell_average_rates`.
+    """
+    births[:, :] = 0.0
+    rates[:, :] = 0.0
+    for p in range(pairs):
+        j = pair_j[p]
+        nj = content[NUMBER, j]
+        if nj <= 0.0:
+            continue
+        k = pair_k[p]
+        nk = content[NUMBER, k]
+        if nk <= 0.0:
+            continue
+        r = pair_beta[p] * nj * nk
+        if r == 0.0:
+            continue
+        if j == k:
+            r *= 0.5
+        i = pair_target[p]
+        births[0, i] += r
+        births[1, i] += r * (pivots[j] + pivots[k])
+        rates[NUMBER, j] -= r
+        rates[NUMBER, k] -= r
+        for q in range(1, carried):
+            from_j = r * content[q, j] / nj
+            from_k = r * content[q, k] / nk
+            births[q + 1, i] += from_j + from_k
+            rates[q, j] -= from_j
+            rates[q, k] -= from_k
+    redistribute_births(pivots, births, rates, carried)
+
+
+@njit(cache=True)
+def list_pairs(target, beta, pair_j, pair_k, pair_target, pair_beta):
+    """Every pair j <= k with target >= 0 and beta_jk != 0, in (j, k) order, into the pair arrays (P >= K (K + 1)
+    / 2); returns how many. For a kernel fixed over many calls (integrate_cell, cell_average_rates)."""
+    n_k = target.shape[0]
+    pairs = 0
+    for j in range(n_k):
+        for k in range(j, n_k):
+            i = target[j, k]
+            if i < 0:
+                break  # pivots increase with k, so every larger partner exceeds the limit too
+            if beta[j, k] != 0.0:
+                pair_j[pairs] = j
+                pair_k[pairs] = k
+                pair_target[pairs] = i
+                pair_beta[pairs] = beta[j, k]
+                pairs += 1
+    return pairs
+
+
 @njit(cache=True)
 def cell_average_rates(content, pivots, target, beta, births, rates):
     """Coalescence rates of one cell by the cell-average technique (Kumar et al. 2006, Chem. Eng. Sci. 61, 3327).
@@ -71,72 +165,32 @@ def cell_average_rates(content, pivots, target, beta, births, rates):
     volume vbar = V_i/B_i is split between pivot i and its neighbour on vbar's side so that number and volume are
     conserved; carried quantities follow the volume (a newborn keeps its quantity per unit volume). Deaths remove
     each parent with its own quantity. Number and volume of every merger are conserved exactly, so the first
-    moment is invariant to round-off.
+    moment is invariant to round-off. Lists the pairs (allocating) and calls :func:`pair_rates`: for one-off calls
+    and the tests; the time loop keeps its pair list over the sub-steps.
     """
     n_q, n_k = content.shape
-    births[:, :] = 0.0
-    rates[:, :] = 0.0
-    for j in range(n_k):
-        nj = content[NUMBER, j]
-        if nj <= 0.0:
-            continue
-        for k in range(j, n_k):
-            i = target[j, k]
-            if i < 0:
-                break  # pivots increase with k, so every larger partner exceeds the limit too
-            nk = content[NUMBER, k]
-            if nk <= 0.0:
-                continue
-            r = beta[j, k] * nj * nk
-            if r == 0.0:
-                continue
-            if j == k:
-                r *= 0.5
-            births[0, i] += r
-            births[1, i] += r * (pivots[j] + pivots[k])
-            rates[NUMBER, j] -= r
-            rates[NUMBER, k] -= r
-            for q in range(1, n_q):
-                from_j = r * content[q, j] / nj
-                from_k = r * content[q, k] / nk
-                births[q + 1, i] += from_j + from_k
-                rates[q, j] -= from_j
-                rates[q, k] -= from_k
-    for i in range(n_k):
-        b = births[0, i]
-        if b <= 0.0:
-            continue
-        vbar = births[1, i] / b
-        if not vbar > 0.0:
-            vbar = pivots[i]  # the volume underflowed (denormal birth rates in a far tail): keep it on the pivot
-        neighbour = i + 1 if vbar >= pivots[i] else i - 1
-        if neighbour < 0 or neighbour >= n_k:
-            # vbar beyond an end pivot only by round-off: keep the volume on pivot i
-            rates[NUMBER, i] += births[1, i] / pivots[i]
-            for q in range(1, n_q):
-                rates[q, i] += births[q + 1, i]
-            continue
-        a = (pivots[neighbour] - vbar) / (pivots[neighbour] - pivots[i])
-        rates[NUMBER, i] += a * b
-        rates[NUMBER, neighbour] += (1.0 - a) * b
-        share = a * pivots[i] / vbar
-        for q in range(1, n_q):
-            rates[q, i] += share * births[q + 1, i]
-            rates[q, neighbour] += (1.0 - share) * births[q + 1, i]
+    size = n_k * (n_k + 1) // 2
+    pair_j, pair_k, pair_target = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64)
+    pair_beta = np.empty(size)
+    pairs = list_pairs(target, beta, pair_j, pair_k, pair_target, pair_beta)
+    pair_rates(content, pivots, pair_j, pair_k, pair_target, pair_beta, pairs, n_q, births, rates)
 
 
 @njit(cache=True)
-def largest_death_rate(content, target, beta, loss_weight):
+def largest_death_rate(content, sections, count, target, beta, loss_weight):
     """max_i sum_k beta_ik N_k w_ik [1/s]: the fastest net per-droplet coalescence rate of a cell (sets sub-steps).
 
-    w_ik = SectionGrid.loss_weight discounts mergers that land back in the larger droplet's own cell, whose gross
-    rate the cell-average birth nearly cancels, so a big droplet sweeping up fines does not force tiny steps.
+    Only the first ``count`` entries of ``sections`` (ascending section indices) are visited: beta must be 0 for
+    every other section (the occupied sections of collision_pairs, or all sections). w_ik = SectionGrid.loss_weight
+    discounts mergers that land back in the larger droplet's own cell, whose gross rate the cell-average birth
+    nearly cancels, so a big droplet sweeping up fines does not force tiny steps.
     """
-    n_k = content.shape[1]
     largest = 0.0
-    for i in range(n_k):
+    for a in range(count):
+        i = sections[a]
         s = 0.0
-        for k in range(n_k):
+        for b in range(count):
+            k = sections[b]
             if target[i, k] < 0:
                 break
             s += beta[i, k] * content[NUMBER, k] * loss_weight[i, k]
@@ -145,24 +199,39 @@ def largest_death_rate(content, target, beta, loss_weight):
 
 
 @njit(cache=True)
-def coalesce_cell(content, pivots, target, loss_weight, beta, dt, max_rate_step, births, k1, k2, trial):
+def carried_rows(content):
+    """1 + the last row q >= 1 of content (Q, K) holding a non-zero value (1 if none): rows from there on are zero
+    and stay zero under coalescence, so the rate loops skip them (FES_REMOVED without reaction)."""
+    n_q, n_k = content.shape
+    for q in range(n_q - 1, 0, -1):
+        for k in range(n_k):
+            if content[q, k] != 0.0:
+                return q + 1
+    return 1
+
+
+@njit(cache=True)
+def coalesce_cell(content, pivots, sections, count, target, loss_weight, beta, pair_j, pair_k, pair_target,
+                  pair_beta, pairs, dt, max_rate_step, births, k1, k2, trial):
     """Advance one cell's coalescence by dt [s] with Heun's method (RK2), in sub-steps h <= max_rate_step / rate.
 
-    content (Q, K) is updated in place; births (Q + 1, K), k1, k2, trial (Q, K) are work space. Heun's method
-    conserves every linear invariant (number-weighted volume, carried quantities) to round-off; the sub-step bound
-    keeps it positive (h times the fastest death rate <= max_rate_step, 0.5 by default). Returns the sub-steps taken.
+    content (Q, K) is updated in place; sections, count, beta: as for :func:`largest_death_rate`; the pair list as
+    for :func:`pair_rates`; births (Q + 1, K), k1, k2, trial (Q, K) are work space. Heun's method conserves every
+    linear invariant (number-weighted volume, carried quantities) to round-off; the sub-step bound keeps it
+    positive (h times the fastest death rate <= max_rate_step, 0.5 by default). Returns the sub-steps taken.
     """
-    rate = largest_death_rate(content, target, beta, loss_weight)
+    rate = largest_death_rate(content, sections, count, target, beta, loss_weight)
     steps = max(1, int(math.ceil(dt * rate / max_rate_step)))
     h = dt / steps
-    n_q, n_k = content.shape
+    n_k = content.shape[1]
+    carried = carried_rows(content)
     for _ in range(steps):
-        cell_average_rates(content, pivots, target, beta, births, k1)
-        for q in range(n_q):
+        pair_rates(content, pivots, pair_j, pair_k, pair_target, pair_beta, pairs, carried, births, k1)
+        for q in range(carried):
             for k in range(n_k):
                 trial[q, k] = content[q, k] + h * k1[q, k]
-        cell_average_rates(trial, pivots, target, beta, births, k2)
-        for q in range(n_q):
+        pair_rates(trial, pivots, pair_j, pair_k, pair_target, pair_beta, pairs, carried, births, k2)
+        for q in range(carried):
             for k in range(n_k):
                 content[q, k] += 0.5 * h * (k1[q, k] + k2[q, k])
     return steps
@@ -183,20 +252,25 @@ def integrate_cell(content, pivots, target, loss_weight, beta, duration, max_rat
     k3 = np.empty((n_q, n_k))
     k4 = np.empty((n_q, n_k))
     trial = np.empty((n_q, n_k))
+    every = np.arange(n_k)
+    size = n_k * (n_k + 1) // 2
+    pair_j, pair_k, pair_target = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64)
+    pair_beta = np.empty(size)
+    pairs = list_pairs(target, beta, pair_j, pair_k, pair_target, pair_beta)
     t = 0.0
     steps = 0
     while t < duration:
-        rate = largest_death_rate(content, target, beta, loss_weight)
+        rate = largest_death_rate(content, every, n_k, target, beta, loss_weight)
         h = min(max_step, duration - t)
         if rate > 0.0:
             h = min(h, max_rate_step / rate)
-        cell_average_rates(content, pivots, target, beta, births, k1)
+        pair_rates(content, pivots, pair_j, pair_k, pair_target, pair_beta, pairs, n_q, births, k1)
         trial[:, :] = content + 0.5 * h * k1
-        cell_average_rates(trial, pivots, target, beta, births, k2)
+        pair_rates(trial, pivots, pair_j, pair_k, pair_target, pair_beta, pairs, n_q, births, k2)
         trial[:, :] = content + 0.5 * h * k2
-        cell_average_rates(trial, pivots, target, beta, births, k3)
+        pair_rates(trial, pivots, pair_j, pair_k, pair_target, pair_beta, pairs, n_q, births, k3)
         trial[:, :] = content + h * k3
-        cell_average_rates(trial, pivots, target, beta, births, k4)
+        pair_rates(trial, pivots, pair_j, pair_k, pair_target, pair_beta, pairs, n_q, births, k4)
         content += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         t = duration if duration - t <= h else t + h
         steps += 1
@@ -234,20 +308,51 @@ def merger_speed_limit(diameter_a, diameter_b, density_droplet, density_slag, in
 
 
 @njit(cache=True)
-def collision_kernel(number, pivots, diameters, velocities, densities, shear_rate, density_slag,
-                     interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency, speed_limit, target,
-                     beta):
-    """Coalescence kernel beta_jk [m^3/s] of one cell: collision frequency x efficiency x merger fraction.
+def pair_kernel(diameter_j, diameter_k, velocity_j, velocity_k, density_j, density_k, speed_limit, tabulated,
+                shear_rate, density_slag, interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency):
+    """Coalescence kernel beta [m^3/s] of one pair: collision frequency x efficiency x merger fraction.
 
     Differential settling (Smoluchowski 1917; Friedlander 2000 eq. 7.56): (pi/4)(d_j + d_k)^2 |v_j - v_k|, approach
     speed |v_j - v_k|. Laminar shear (Smoluchowski 1917): (1/6) G (d_j + d_k)^3, approach speed G (d_j + d_k)/2.
-    Each mechanism's collisions merge by :func:`merger_efficiency` at its own approach speed; ``efficiency`` is
-    the collision efficiency (a calibration parameter). Pairs whose merger would exceed the size limit
-    (target < 0) get 0. diameters [m] and densities [kg/m^3] are the droplets' actual ones (after reaction),
-    velocities [m/s] their settling velocities in this cell (hindered), shear_rate G [1/s]. speed_limit (K, K):
-    :func:`merger_speed_limit` per pair for the 'step' rule with fixed sizes, or an empty (0, 0) array to evaluate
-    Eq. 2 directly. number (K,) [1/m^3] and pivots (K,) [m^3]: pairs with a section below
-    NEGLIGIBLE_VOLUME_FRACTION get 0 (far upwind tails; their mergers are nil and Eq. 2 is the costly part).
+    Each mechanism's collisions merge by :func:`merger_efficiency` at its own approach speed, or, when
+    ``tabulated``, by the step rule's speed_limit [m/s] of the pair (:func:`merger_speed_limit`); ``efficiency`` is
+    the collision efficiency (a calibration parameter). Diameters [m], velocities [m/s], densities [kg/m^3],
+    shear_rate G [1/s].
+    """
+    d_sum = diameter_j + diameter_k
+    rho = 0.5 * (density_j + density_k)
+    dv = abs(velocity_j - velocity_k)
+    shear_speed = 0.5 * shear_rate * d_sum
+    b = 0.0
+    if dv > 0.0:
+        if tabulated:
+            e = 1.0 if dv <= speed_limit else 0.0
+        else:
+            e = merger_efficiency(diameter_j, diameter_k, dv, rho, density_slag, interfacial_tension, psi,
+                                  virtual_mass, form, threshold, rule)
+        b += 0.25 * math.pi * d_sum * d_sum * dv * e
+    if shear_rate > 0.0:
+        if tabulated:
+            e = 1.0 if shear_speed <= speed_limit else 0.0
+        else:
+            e = merger_efficiency(diameter_j, diameter_k, shear_speed, rho, density_slag, interfacial_tension, psi,
+                                  virtual_mass, form, threshold, rule)
+        b += shear_rate * d_sum * d_sum * d_sum / 6.0 * e
+    return b * efficiency
+
+
+@njit(cache=True)
+def collision_kernel(number, pivots, diameters, velocities, densities, shear_rate, density_slag,
+                     interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency, speed_limit, target,
+                     beta):
+    """Coalescence kernel beta_jk [m^3/s] of one cell, every pair (:func:`pair_kernel`); beta (K, K) is written.
+
+    diameters [m] and densities [kg/m^3] are the droplets' actual ones (after reaction), velocities [m/s] their
+    settling velocities in this cell (hindered), shear_rate G [1/s]. speed_limit (K, K): :func:`merger_speed_limit`
+    per pair for the 'step' rule with fixed sizes, or an empty (0, 0) array to evaluate Eq. 2 directly. Pairs whose
+    merger would exceed the size limit (target < 0) get 0. number (K,) [1/m^3] and pivots (K,) [m^3]: pairs with a
+    section below NEGLIGIBLE_VOLUME_FRACTION get 0 (far upwind tails; their mergers are nil and Eq. 2 is the costly
+    part). The time loop uses :func:`collision_pairs`, which gives the same beta on the pairs it lists.
     """
     n_k = diameters.size
     tabulated = speed_limit.shape[0] == n_k
@@ -256,27 +361,57 @@ def collision_kernel(number, pivots, diameters, velocities, densities, shear_rat
             b = 0.0
             if (target[j, k] >= 0 and number[j] * pivots[j] >= NEGLIGIBLE_VOLUME_FRACTION
                     and number[k] * pivots[k] >= NEGLIGIBLE_VOLUME_FRACTION):
-                d_sum = diameters[j] + diameters[k]
-                rho = 0.5 * (densities[j] + densities[k])
-                dv = abs(velocities[j] - velocities[k])
-                shear_speed = 0.5 * shear_rate * d_sum
-                if dv > 0.0:
-                    if tabulated:
-                        e = 1.0 if dv <= speed_limit[j, k] else 0.0
-                    else:
-                        e = merger_efficiency(diameters[j], diameters[k], dv, rho, density_slag, interfacial_tension,
-                                              psi, virtual_mass, form, threshold, rule)
-                    b += 0.25 * math.pi * d_sum * d_sum * dv * e
-                if shear_rate > 0.0:
-                    if tabulated:
-                        e = 1.0 if shear_speed <= speed_limit[j, k] else 0.0
-                    else:
-                        e = merger_efficiency(diameters[j], diameters[k], shear_speed, rho, density_slag,
-                                              interfacial_tension, psi, virtual_mass, form, threshold, rule)
-                    b += shear_rate * d_sum * d_sum * d_sum / 6.0 * e
-                b *= efficiency
+                b = pair_kernel(diameters[j], diameters[k], velocities[j], velocities[k], densities[j], densities[k],
+                                speed_limit[j, k] if tabulated else 0.0, tabulated, shear_rate, density_slag,
+                                interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency)
             beta[j, k] = b
             beta[k, j] = b
+
+
+@njit(cache=True)
+def occupied_sections(number, pivots, sections):
+    """Ascending indices of the sections with N_k x_k >= NEGLIGIBLE_VOLUME_FRACTION into sections (K,) int64;
+    number (K,) [1/m^3], pivots (K,) [m^3]. Returns how many."""
+    count = 0
+    for k in range(number.size):
+        if number[k] * pivots[k] >= NEGLIGIBLE_VOLUME_FRACTION:
+            sections[count] = k
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def collision_pairs(sections, count, diameters, velocities, densities, shear_rate, density_slag,
+                    interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency, speed_limit, target,
+                    beta, pair_j, pair_k, pair_target, pair_beta):
+    """Kernel of one cell on its occupied sections, and the list of pairs that merge; returns the list's length.
+
+    sections (K,) int64, count: the occupied sections (:func:`occupied_sections`). For every pair j <= k of them
+    within the size limit, writes beta_jk = beta_kj (:func:`pair_kernel`; other entries of beta are left as they
+    are and must not be read) and, where beta_jk > 0, appends (j, k, target, beta) to the pair arrays (P,), in the
+    order of the full (j, k) loop. Other arguments as :func:`collision_kernel`.
+    """
+    tabulated = speed_limit.shape[0] == diameters.size
+    pairs = 0
+    for a in range(count):
+        j = sections[a]
+        for c in range(a, count):
+            k = sections[c]
+            i = target[j, k]
+            if i < 0:
+                break  # pivots increase with k, so every larger partner exceeds the limit too
+            b = pair_kernel(diameters[j], diameters[k], velocities[j], velocities[k], densities[j], densities[k],
+                            speed_limit[j, k] if tabulated else 0.0, tabulated, shear_rate, density_slag,
+                            interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency)
+            beta[j, k] = b
+            beta[k, j] = b
+            if b != 0.0:
+                pair_j[pairs] = j
+                pair_k[pairs] = k
+                pair_target[pairs] = i
+                pair_beta[pairs] = b
+                pairs += 1
+    return pairs
 
 
 @njit(cache=True)
@@ -289,17 +424,24 @@ def coalesce_zone(content, diameters, velocities, densities, volume_fraction, sh
     :func:`cell_properties`; shear_rate (J,) [1/s]; speed_limit as in :func:`collision_kernel`; pivots, target,
     loss_weight from the grid. Cells below NEGLIGIBLE_VOLUME_FRACTION are skipped (the far tails the upwind scheme
     spreads ahead of a front, whose coalescence rate ~ phi^2 is nil). beta (K, K), births (Q + 1, K), k1, k2,
-    trial (Q, K) are work space.
+    trial (Q, K) are work space; the section and pair lists (K and K (K + 1) / 2 entries) are allocated once per
+    call, outside the cell loop.
     """
+    n_k = pivots.size
+    size = n_k * (n_k + 1) // 2
+    sections = np.empty(n_k, np.int64)
+    pair_j, pair_k, pair_target = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64)
+    pair_beta = np.empty(size)
     most = 0
     for j in range(content.shape[0]):
         if volume_fraction[j] < NEGLIGIBLE_VOLUME_FRACTION:
             continue
-        collision_kernel(content[j, NUMBER], pivots, diameters[j], velocities[j], densities[j], shear_rate[j],
-                         density_slag, interfacial_tension, psi, virtual_mass, form, threshold, rule, efficiency,
-                         speed_limit, target, beta)
-        steps = coalesce_cell(content[j], pivots, target, loss_weight, beta, dt, max_rate_step, births, k1, k2,
-                              trial)
+        count = occupied_sections(content[j, NUMBER], pivots, sections)
+        pairs = collision_pairs(sections, count, diameters[j], velocities[j], densities[j], shear_rate[j],
+                                density_slag, interfacial_tension, psi, virtual_mass, form, threshold, rule,
+                                efficiency, speed_limit, target, beta, pair_j, pair_k, pair_target, pair_beta)
+        steps = coalesce_cell(content[j], pivots, sections, count, target, loss_weight, beta, pair_j, pair_k,
+                              pair_target, pair_beta, pairs, dt, max_rate_step, births, k1, k2, trial)
         most = max(most, steps)
     return most
 
