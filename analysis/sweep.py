@@ -18,7 +18,8 @@ ranges ``a:b`` with SALib (bounds a and b; n is not used; ``:log`` samples log10
 design from ``--samples N``: lhs N, sobol N (D + 2) (N a power of 2), morris N (D + 1), for D swept keys.
 
 Each point is a task keyed by a hash of its resolved case (:func:`point_hash`): ``OUT/points/<hash>/`` holds
-popbal's own output (:meth:`popbal.Result.save`) and, written last and atomically, ``done.json`` with the point's
+popbal's own output (:meth:`popbal.Result.save`; time series, case and metadata, and distribution.npz only with
+``distribution=True`` / ``--distribution``) and, written last and atomically, ``done.json`` with the point's
 numbers; a rerun skips every point that has it. A point that fails writes ``error.json`` instead and is retried by
 the next run; the sweep goes on, records the error in the table and :func:`main` exits 3 saying how many failed.
 
@@ -361,10 +362,11 @@ def read_done(folder) -> dict | None:
         return None
 
 
-def run_point(case_dict: dict, folder: str, source: str = "") -> dict:
+def run_point(case_dict: dict, folder: str, source: str = "", distribution: bool = False) -> dict:
     """Run one point (the task a worker executes): popbal on the resolved case ``case_dict``, its output saved into
-    ``folder`` (popbal's Result.save), then ``done.json`` with :data:`METRICS` written last, atomically. An error is
-    recorded in ``error.json`` and returned (status 'failed'), not raised."""
+    ``folder`` (popbal's Result.save; distribution.npz only if ``distribution``, as the table needs only the time
+    series), then ``done.json`` with :data:`METRICS` written last, atomically. An error is recorded in
+    ``error.json`` and returned (status 'failed'), not raised."""
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # effective only if Numba is not yet imported in this process
     import popbal
 
@@ -374,7 +376,7 @@ def run_point(case_dict: dict, folder: str, source: str = "") -> dict:
     try:
         case = resolve(case_dict, None, source)
         result = popbal.run(popbal.setup(case), progress=False)
-        result.save(folder)
+        result.save(folder, distribution=distribution)
         record.update(summarize(result.timeseries), slag_viscosity=case.slag_viscosity,
                       residence_time=result.model.residence_time, status="done", error="",
                       wall_time=time.perf_counter() - started)
@@ -493,8 +495,9 @@ class Executor:
         for address in sorted(self.client.scheduler_info()["workers"]):
             self.client.run(warm_numba, case_dicts, workers=[address])
 
-    def map(self, tasks: list[tuple[dict, str, str]], progress: bool):
-        """Yield the record of each task (case_dict, folder, source) as it finishes, with a tqdm bar."""
+    def map(self, tasks: list[tuple[dict, str, str, bool]], progress: bool):
+        """Yield the record of each task (case_dict, folder, source, distribution) as it finishes, with a tqdm
+        bar."""
         from tqdm.auto import tqdm
 
         with tqdm(total=len(tasks), desc="sweep", unit="point", disable=not progress or not tasks) as bar:
@@ -542,14 +545,16 @@ class SweepResult:
 
 def sweep(case, axes, design: str = "grid", samples: int | None = None, out="sweep", workers: int | None = None,
           scheduler: str | None = None, seed: int = 0, points_dir=None, client=None, progress: bool = True,
-          plots: bool = True, command_line: str | None = None) -> SweepResult:
+          plots: bool = True, command_line: str | None = None, distribution: bool = False) -> SweepResult:
     """Run popbal over a design of case keys and write the table, netCDF, plots (and sensitivity) into ``out``.
 
     case: a preset name, a TOML path or a :class:`settler.cases.Case`. axes: ``["section.key=SPEC", ...]`` or
     ``{"section.key": SPEC or [values]}`` (:func:`parse_axis`). design, samples, seed: see the module docstring.
     workers, scheduler, client: where the points run (:class:`Executor`; ``client`` an open dask Client to reuse).
     points_dir: the folder of point folders (default ``out/points``; several sweeps may share one). Finished points
-    are read back, not rerun. Raises CaseError / OutputError for refused input; failed points are in the table.
+    are read back, not rerun. distribution: also save each point's distribution.npz (off: the time series are all
+    the table needs, and saving the distribution is the slowest part of saving a point). Raises CaseError /
+    OutputError for refused input; failed points are in the table.
     A script that calls it with workers > 0 needs the ``if __name__ == "__main__":`` guard (the LocalCluster's
     worker processes are spawned and import the script's module); notebooks do not.
     """
@@ -571,7 +576,7 @@ def sweep(case, axes, design: str = "grid", samples: int | None = None, out="swe
         if done is not None:
             records[digest] = {**done, "resumed": True}
         else:
-            tasks[digest] = (case_.to_dict(), str(points / digest), base.source)
+            tasks[digest] = (case_.to_dict(), str(points / digest), base.source, distribution)
     # no cluster is started when every point is done
     with Executor(workers if tasks else 0, scheduler if tasks else None, client) as executor:
         if progress:
@@ -986,6 +991,10 @@ def add_arguments(parser):
                              "or 'dask scheduler') instead of a LocalCluster; its workers need settler importable "
                              "and NUMBA_NUM_THREADS=1")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sampled designs (default 0)")
+    parser.add_argument("--distribution", action="store_true",
+                        help="also save each point's size distribution (points/<hash>/distribution.npz, 6 MB and "
+                             "0.5 s per furnace point at the preset's resolution; default: the time series only, "
+                             "which is all sweep.csv needs)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -999,7 +1008,8 @@ def main(args) -> int:
     out = args.out if args.out is not None else f"sweep-{base.case.name}"
     try:
         result = sweep(base, args.overrides, args.design, args.samples, out, args.workers, args.scheduler,
-                       args.seed, progress=not args.quiet, command_line=getattr(args, "command_line", None))
+                       args.seed, progress=not args.quiet, command_line=getattr(args, "command_line", None),
+                       distribution=args.distribution)
     except KeyboardInterrupt:
         print(f"settler sweep: interrupted; the finished points are kept in {Path(out) / POINTS}/ and the same "
               "command skips them", file=sys.stderr)
