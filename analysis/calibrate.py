@@ -263,6 +263,7 @@ class Calibration:
     evaluations: int
     status: str
     series: dict[str, tuple[pd.DataFrame, pd.DataFrame]] = field(default_factory=dict, repr=False)
+    fixed: dict = field(default_factory=dict)  # {section.key: value} held during the fit (--fix)
 
     def summary(self) -> str:
         """A plain-text report: estimates with standard errors, correlations, undetermined parameters, errors."""
@@ -375,7 +376,8 @@ def calibrate(cases=("simple",), holdout: str | None = "deep", parameters=DEFAUL
         residual_rms=float(np.sqrt(np.mean(fit.fun**2))), cases=list(cases), holdout=holdout, columns=columns,
         errors=errors, sigma={r.name: r.sigma.to_dict() for r in all_refs},
         windows={r.name: r.window for r in all_refs}, reference_commits={r.name: r.commit for r in all_refs},
-        undetermined=undetermined, evaluations=evaluations["n"], status=fit.message, series=series)
+        undetermined=undetermined, evaluations=evaluations["n"], status=fit.message, series=series,
+        fixed=dict(fixed or {}))
 
 
 def parameter_uncertainty(jacobian, residual, x, parameters):
@@ -460,6 +462,12 @@ def layer_text(result: Calibration, command: str = "") -> str:
         flag = f"; NOT DETERMINED: {result.undetermined[name]}" if name in result.undetermined else ""
         lines.append(f"{name} = {value!r}  # {unit} [derived] least-squares fit to data/reference/{{{cases}}}, "
                      f"standard error {se:.3g}{flag}")
+    # the [popbal] keys held during the fit belong to the fitted form: the layer applies them with the estimates
+    for key, value in result.fixed.items():
+        section, _, name = key.partition(".")
+        if section == "popbal" and name not in result.parameters:
+            text = _toml_string(value) if isinstance(value, str) else repr(value)
+            lines.append(f"{name} = {text}  # [chosen] held fixed during the fit (--fix {key}={value})")
     lines += ["", "[provenance]",
               f"command = {_toml_string(command or 'settler calibrate')}",
               f"code_commit = {_toml_string(str(commit['commit']))}",

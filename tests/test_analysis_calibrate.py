@@ -164,13 +164,33 @@ def test_layer_round_trips_and_an_override_still_wins(fitted, tmp_path, monkeypa
         load_case("simple", {"case.calibration": "missing"})
 
 
-def test_simple_preset_is_calibrated_out_of_the_box():
-    """data/cases/simple.toml names the 'paper' layer: its [popbal] values reach the case, an explicit override
-    wins, and the furnace preset (fitted on 0.2 m boxes only) does not take the layer."""
+def test_layer_carries_the_keys_held_fixed(fitted, tmp_path, monkeypatch):
+    """[popbal] keys held by --fix (the channel form the estimates belong to) are written into the layer and reach a
+    case that names it; keys of other sections (case.calibration) are not."""
+    import dataclasses
+
+    result = dataclasses.replace(fitted, fixed={"popbal.channel_radius_form": "flux", "popbal.shear_coefficient": 1.0,
+                                                "case.calibration": "none"})
+    path = cal.write_layer(result, tmp_path / "formed.toml")
+    layer = tomllib.loads(path.read_text())
+    assert layer["popbal"]["channel_radius_form"] == "flux"
+    assert layer["popbal"]["shear_coefficient"] == 1.0
+    assert "calibration" not in layer["popbal"] and "case" not in layer
+    real_path = cases_module.calibration_path
+    monkeypatch.setattr(cases_module, "calibration_path", lambda name: path if name == "formed" else real_path(name))
+    case = load_case("simple", {"case.calibration": "formed"})
+    assert case.popbal.channel_radius_form == "flux"
+    assert case.popbal.channel_coefficient == fitted.estimates["channel_coefficient"]
+
+
+@pytest.mark.parametrize("preset", ["simple", "cubic"])
+def test_fitted_presets_are_calibrated_out_of_the_box(preset):
+    """data/cases/simple.toml and cubic.toml (the fitted cases) name the 'paper' layer: its [popbal] values reach
+    the case, an explicit override wins, and the furnace preset (fitted on 0.2 m boxes only) does not take it."""
     layer = tomllib.loads(cases_module.calibration_path("paper").read_text())["popbal"]
-    case = load_case("simple")
+    case = load_case(preset)
     assert case.case.calibration == "paper"
     for name, value in layer.items():
         assert getattr(case.popbal, name) == value, name
-    assert load_case("simple", ["popbal.collision_efficiency=0.5"]).popbal.collision_efficiency == 0.5
+    assert load_case(preset, ["popbal.collision_efficiency=0.5"]).popbal.collision_efficiency == 0.5
     assert load_case("furnace").case.calibration is None

@@ -205,7 +205,7 @@ def test_model_channel_reaches_the_steady_plume_velocity():
 
 def test_bad_popbal_inputs_are_refused_clearly():
     with pytest.raises(CaseError, match="popbal.channel_radius_factor = 3.0.*smaller than the box"):
-        popbal.setup("simple", popbal__channel_radius_factor=3.0)
+        popbal.setup("simple", popbal__channel_radius_form="inlet", popbal__channel_radius_factor=3.0)
     with pytest.raises(CaseError, match="popbal.channel_feed_fraction = 0.5: allowed 0 when"):
         popbal.setup("simple", popbal__channel_radius_factor=0.0, popbal__channel_feed_fraction=0.5)
     with pytest.raises(CaseError, match="slag_flow = 'horizontal': needs slag.feed_rate > 0"):
