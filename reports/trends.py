@@ -217,9 +217,10 @@ print(f"without coalescence the loss changes by a factor {spread:.3f} over depth
 # Of these, the slag temperature, the throughput and, within limits, the bath depth are what an operator sets; their
 # costs (energy and refractory wear, production) are outside this model.
 #
-# **What the model cannot settle.** The collision efficiency is the least known of the keys (below: its value in
-# the calibration layer, fitted to the full engine on a 0.2 m box), and the furnace preset does not apply that layer
-# (the fit does not predict the deep reference case). Its row of the ranking is therefore a statement about the
+# **What the model cannot settle.** The collision efficiency is the least known of the keys (below: its value and
+# standard error in the calibration layer, fitted to the full engine on the 0.2 m boxes, and the baseline's loss at
+# that value), and the furnace preset does not apply that layer (the fit does not predict the deep reference case,
+# and the furnace has no plume channel). Its row of the ranking is therefore a statement about the
 # model's uncertainty as much as about the furnace: if coalescence in the dilute furnace slag is weak, the loss is
 # decades above the baseline (the trend's first point is no coalescence at all). The absolute losses also rest on
 # the plug-flow column (no recirculation, no stirring by gas or by the feed, no entrainment at the tap hole) and on
@@ -234,3 +235,11 @@ low, high, _ = sweep.FURNACE_AXES["popbal.collision_efficiency"]
 print(f"calibration layer 'paper': collision_efficiency = {efficiency:.3g} +- {error:.3g} (standard error), fitted "
       f"on {', '.join(layer['provenance']['fitted_cases'])}; the study's range {low:g}-{high:g}, baseline "
       f"{base.popbal.collision_efficiency:g}")
+# the baseline furnace at the layer's value (a coefficient fitted on 0.2 m boxes, applied here as it is)
+at_layer = sweep.sweep(base, [f"popbal.collision_efficiency={efficiency!r},{base.popbal.collision_efficiency!r}"],
+                       "grid", out=folder / "layer_efficiency", points_dir=folder / sweep.POINTS, workers=0,
+                       progress=False, plots=False).table.set_index("popbal.collision_efficiency")["matte_loss"]
+calibrated_loss, baseline_loss = at_layer.loc[efficiency], at_layer.loc[base.popbal.collision_efficiency]
+print(f"baseline loss at the layer's collision efficiency {efficiency:.3g}: {100 * calibrated_loss:.3g} %; at the "
+      f"study's baseline {base.popbal.collision_efficiency:g}: {100 * baseline_loss:.3g} % (factor "
+      f"{calibrated_loss / baseline_loss:.3g})")
