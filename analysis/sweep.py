@@ -843,18 +843,20 @@ def plot_sensitivity(frame: pd.DataFrame, design: str, title: str = ""):
 #: feed distribution whose mean size and width are case keys, matched to the preset's table: mean 200 um with scale
 #: std 0.3 on [0.1, 1.9] has a mass-mean diameter of 245 um [derived], the table's (Jylha et al. 2020, Table 2) is
 #: 247 um. end_time 1e6 s so that every run stops at its own residence time (a deeper bath or a lower throughput
-#: keeps the slag longer). Resolution [chosen] for speed: 50 cells, 60 s steps, 2 sections per doubling run a point in
-#: about 0.6 s against 2 s at the preset's 100 cells, 30 s, 3 per doubling; the baseline loss differs by -5 % from
-#: the preset's resolution and by -12 % from 200 cells, 15 s, 4 per doubling (measured 2026-12-02 on the table feed:
-#: 8.84e-4, 9.34e-4, 1.01e-3), upwind diffusion in z. The tap hole's height, unused by the plug-flow column, is
-#: lowered to 0.2 m [chosen] so that it lies inside the thinnest slag layer of the study (0.5 m).
+#: keeps the slag longer). Resolution: the preset's own (100 cells, 30 s steps, 3 sections per doubling). A coarser
+#: study resolution (50 cells, 60 s, 2 per doubling) biased the baseline loss 5 % low (and 12 % low against 200
+#: cells, 15 s, 4 per doubling; measured 2026-12-02 on the table feed: 8.84e-4, 9.34e-4, 1.01e-3; upwind diffusion
+#: in z); it was used only for speed, until popbal's pair-list coalescence halved a point's cost: 100 points at the
+#: preset's resolution took 110 s on the 2-core machine with 2 workers (load average 2.9-4.8; 168 s at 5.7-6.1),
+#: benchmarks/bench_sweep.py --resolution preset, 2026-12-02. The tap hole's height, unused by the plug-flow
+#: column, is lowered to 0.2 m [chosen] so that it lies inside the thinnest slag layer of the study (0.5 m).
 FURNACE_BASE = {
     "feed.distribution": "normal", "feed.mean_diameter": 200e-6, "feed.scale_std": 0.3, "feed.scale_min": 0.1,
-    "feed.scale_max": 1.9, "popbal.end_time": 1.0e6, "popbal.height_cells": 50, "popbal.time_step": 60.0,
-    "popbal.sections_per_doubling": 2, "geometry.outlet_height": 0.2,
+    "feed.scale_max": 1.9, "popbal.end_time": 1.0e6, "geometry.outlet_height": 0.2,
 }
-#: Coarser still for quick=True (report CI: numbers that run in seconds, not results).
-FURNACE_QUICK = {"popbal.height_cells": 20, "popbal.time_step": 120.0, "popbal.output_interval": 1800.0}
+#: Coarser for quick=True (report CI: numbers that run in seconds, not results).
+FURNACE_QUICK = {"popbal.height_cells": 20, "popbal.time_step": 120.0, "popbal.output_interval": 1800.0,
+                 "popbal.sections_per_doubling": 2}
 #: The study's axes: key -> (low, high, source). The one-at-a-time trends take TREND_POINTS values over each range
 #: (linear; the baseline value is one of them), the others at the baseline; the global designs sample the same box.
 FURNACE_AXES = {
