@@ -137,8 +137,10 @@ def test_rerun_skips_finished_points_and_redoes_unfinished(tmp_path, monkeypatch
 
 # ---------------------------------------------------------------------------------------------------------- failure
 def test_failing_point_is_recorded_and_the_command_exits_3(tmp_path, capsys):
-    # a channel wider than the 0.2 m box passes the case schema but popbal.setup refuses it: a failure in the task
-    status = settler_main(["sweep", "simple", *TINY, "popbal.channel_radius_factor=1,10", "--workers", "0",
+    # with the 'inlet' channel form (the simple preset's calibration uses 'flux', where any factor fits), a channel
+    # wider than the 0.2 m box passes the case schema but popbal.setup refuses it: a failure in the task
+    status = settler_main(["sweep", "simple", *TINY, "popbal.channel_radius_form=inlet",
+                           "popbal.channel_radius_factor=1,10", "--workers", "0",
                            "--out", str(tmp_path), "--quiet"])
     assert status == 3
     assert "1 of 2 points failed" in capsys.readouterr().err
