@@ -3,8 +3,9 @@
     python benchmarks/bench_sweep.py [--points 100] [--workers 2] [--resolution study|preset] [--out DIR]
 
 Runs a Latin-hypercube design of ``--points`` points over the furnace study's box (analysis.sweep.FURNACE_AXES) from
-the study's baseline (analysis.sweep.FURNACE_BASE; ``--resolution preset`` keeps the furnace preset's 100 cells,
-30 s steps and 3 sections per doubling) into a fresh folder, so no point is resumed, and prints the wall time of
+the study's baseline (analysis.sweep.FURNACE_BASE, which since popbal's pair lists (b43d4c6) runs at the furnace
+preset's own resolution; ``--resolution preset`` sets the preset's 100 cells, 30 s steps and 3 sections per doubling
+explicitly, the same points today) into a fresh folder, so no point is resumed, and prints the wall time of
 the whole sweep (cluster start, Numba warm-up, points, outputs), points per second, and the mean, median and
 largest wall time of one point in its worker. Target from issue 13: 100 furnace points in under 2 minutes on the
 project's 2-core machine. A figure, not a test: the machine is shared, so the load average before and after is
@@ -39,8 +40,9 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                         help="LocalCluster worker processes (default: the CPU count); 0: in this process")
     parser.add_argument("--resolution", choices=("study", "preset"), default="study",
-                        help="study: the furnace study's resolution (analysis.sweep.FURNACE_BASE, default); preset: "
-                             "the furnace preset's 100 cells, 30 s, 3 sections per doubling")
+                        help="study: the furnace study's baseline (analysis.sweep.FURNACE_BASE, default: since b43d4c6 "
+                             "at the preset's resolution); preset: the furnace preset's 100 cells, 30 s, 3 sections "
+                             "per doubling set explicitly (the same today)")
     parser.add_argument("--out", metavar="DIR", default=None,
                         help="sweep folder, which must not exist yet (default: a temporary folder, deleted after)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the design (default 1)")
