@@ -186,7 +186,7 @@ depth = sweep.sweep(base, [f"geometry.height={sweep.FURNACE_AXES['geometry.heigh
 with_coalescence = study["trends"]["geometry.height"].table.set_index("geometry.height")["matte_loss"]
 check = depth.table.set_index("geometry.height")[["matte_loss"]].rename(columns={"matte_loss": "no coalescence"})
 check["with coalescence (trend above)"] = with_coalescence.reindex(check.index)
-(100 * check).style.format("{:.3g}", na_rep="–").format_index("{:g}").set_caption(
+(100 * check).style.format("{:.3g}", na_rep="–").format_index("{:.3g}").set_caption(
     "matte loss [%] against slag depth [m]")
 
 # %%
