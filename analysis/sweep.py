@@ -367,7 +367,8 @@ def run_point(case_dict: dict, folder: str, source: str = "", distribution: bool
     ``folder`` (popbal's Result.save; distribution.npz only if ``distribution``, as the table needs only the time
     series), then ``done.json`` with :data:`METRICS` written last, atomically. An error is recorded in
     ``error.json`` and returned (status 'failed'), not raised."""
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # effective only if Numba is not yet imported in this process
+    if "numba" not in sys.modules:  # a fresh worker process: one Numba thread. Never once Numba is loaded: Numba
+        os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # re-reads the variable and refuses a change (in-process runs)
     import popbal
 
     started = time.perf_counter()
