@@ -872,10 +872,11 @@ FURNACE_AXES = {
                                   "time grows with it (3-9 h)"),
     "slag.feed_rate": (10.208333333333334, 40.833333333333336, "[chosen] slag throughput 0.5 to 2 times the "
                        "preset's 20.4 kg/s (derived there from a 6 h residence): residence 12 h to 3 h at 1 m"),
-    "popbal.collision_efficiency": (0.0, 3.0, "[derived] covers the calibrated 1.60 +- 1.35 (standard error) of "
-                                              "data/calibration/paper.toml, fitted to the simple case (2026-12-02), "
-                                              "and 0, no coalescence; the baseline keeps the furnace preset's "
-                                              "uncalibrated 1, as the preset does not apply that layer"),
+    "popbal.collision_efficiency": (0.0, 3.0, "[chosen] 0 (no coalescence) to 3; the calibration layer "
+                                              "data/calibration/paper.toml (simple + cubic, 2026-12-02) gives 0.09 "
+                                              "+- 0.25, not determined by its data (first fit, simple only: 1.60 +- "
+                                              "1.35); the baseline keeps the furnace preset's uncalibrated 1, as "
+                                              "the preset does not apply that layer"),
 }
 TREND_POINTS = 7
 #: Global designs of the full study: Sobol N (points N (D + 2)), Morris trajectories (points r (D + 1)).
