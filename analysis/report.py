@@ -364,11 +364,33 @@ def _read(path: Path):
         return None
 
 
+def jupyter_data_folders() -> list[str]:
+    """Jupyter data folders (PREFIX/share/jupyter) of this interpreter's prefix and its base prefix, where they hold
+    nbconvert's templates. Jupyter's search path holds only this environment's prefix, so a virtual environment that
+    takes nbconvert from the system's site packages (``python -m venv --system-site-packages``) would not find them
+    ("No template sub-directory with name 'lab'")."""
+    folders = []
+    for prefix in dict.fromkeys((sys.prefix, sys.base_prefix)):
+        folder = Path(prefix) / "share" / "jupyter"
+        if (folder / "nbconvert" / "templates").is_dir():
+            folders.append(str(folder))
+    return folders
+
+
 def to_html(notebook) -> str:
     """The executed notebook as a standalone HTML page (nbconvert's HTML exporter; figures embedded)."""
     from nbconvert import HTMLExporter
 
-    body, _ = HTMLExporter().from_notebook_node(notebook)
+    saved = os.environ.get("JUPYTER_PATH")
+    os.environ["JUPYTER_PATH"] = os.pathsep.join([p for p in (saved or "").split(os.pathsep) if p]
+                                                 + jupyter_data_folders())
+    try:
+        body, _ = HTMLExporter().from_notebook_node(notebook)
+    finally:
+        if saved is None:
+            os.environ.pop("JUPYTER_PATH", None)
+        else:
+            os.environ["JUPYTER_PATH"] = saved
     return body
 
 
