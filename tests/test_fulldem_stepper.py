@@ -11,16 +11,10 @@ from fulldem.stepper import Simulation
 from settler.cases import load_case
 from settler.physics import relaxation_time, square_duct_factor, stokes_velocity
 
+# one droplet released in quiescent slag: the set-up the verification report runs too
+from analysis.verification import single_droplet as _single_droplet
 
-def _single_droplet(diameter, box, cell, fluid_step, t_end, extra=()):
-    case = load_case("simple", ["feed.mass_rate=0", "coalescence.enabled=false", f"fulldem.cell_size={cell}",
-                                f"fulldem.fluid_step={fluid_step}", *extra])
-    store = DropletStore(16)
-    store.add([[box[0] / 2, box[1] / 2, box[2] - 0.05]], diameter, 5100.0)
-    sim = Simulation(case, droplets=store, feed=False, box=(box, (0.0, 0.0, 0.0)))
-    while sim.time < t_end - 1e-12:
-        sim.step()
-    return sim, -store.velocity[0, 2]
+
 
 
 @pytest.mark.parametrize("diameter, tolerance, kernel", [(500e-6, 0.02, "filtered"), (2e-3, 0.03, "filtered"),

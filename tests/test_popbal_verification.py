@@ -67,10 +67,7 @@ def test_sum_kernel_distribution_close_to_golovin():
 
 
 # ----------------------------------------------------------------------------------------------- settling
-SINGLE_SIZE = {"feed.scale_std": 0.0, "coalescence.enabled": False, "popbal.channel_feed_fraction": 0.0,
-               "popbal.channel_radius_factor": 0.0, "popbal.hindered_exponent": 0.0, "drag.law": "stokes",
-               "popbal.height_cells": 20, "popbal.time_step": 5.0, "popbal.max_courant": 100.0,
-               "popbal.output_interval": 50.0}
+from analysis.verification import SINGLE_SIZE  # one size, no coalescence, channel or hindering; Stokes drag
 
 
 def test_single_size_settles_at_the_stokes_velocity():
