@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.runs import read_json
 from settler.output import read_channel_profile, read_time_series, to_json
 
 #: Largest size [bytes] of one stored reference folder; above it fewer snapshots are kept (three cases must stay
@@ -190,15 +191,6 @@ def _git_commit() -> str | None:
     return text if done.returncode == 0 and text else None
 
 
-def _read_json(path: Path):
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise StoreError(f"{path}: cannot be read as JSON ({exc})") from None
-
-
 def _folder_size(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
 
@@ -261,8 +253,8 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
     if "time" not in series:
         raise StoreError(f"{run / 'timeseries.csv'}: has no time column")
     last = series.iloc[-1] if len(series) else None
-    metadata = _read_json(run / "metadata.json")
-    summary = _read_json(run / "summary.json")
+    metadata = read_json(run / "metadata.json", StoreError)
+    summary = read_json(run / "summary.json", StoreError)
     if command is None and isinstance(metadata, dict):
         command = metadata.get("command")
     if commit is None and isinstance(metadata, dict):

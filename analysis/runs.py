@@ -200,8 +200,8 @@ def load_run(folder) -> Run:
             from None
     if "time" not in series:
         raise OutputError(f"{series_path}: has no time column; not a time series of settler.output")
-    reference = _read_json(folder / "reference.json")
-    metadata = _read_json(folder / "metadata.json")
+    reference = read_json(folder / "reference.json")
+    metadata = read_json(folder / "metadata.json")
     if metadata is None and isinstance(reference, dict) and isinstance(reference.get("metadata"), dict):
         metadata = reference["metadata"]
     optional = {name: read_channel_profile(folder / name) if (folder / name).is_file() else None
@@ -211,13 +211,15 @@ def load_run(folder) -> Run:
                merges_by_size=optional["merges_by_size.csv"], channel_profile=optional["channel_profile.csv"])
 
 
-def _read_json(path: Path):
+def read_json(path: Path, error=OutputError):
+    """The JSON document in ``path``, None if there is no such file; an unreadable one raises ``error`` (an
+    exception class) naming the file."""
     if not path.is_file():
         return None
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise OutputError(f"{path}: cannot be read as JSON ({exc})") from None
+        raise error(f"{path}: cannot be read as JSON ({exc})") from None
 
 
 def _engine(folder: Path, metadata) -> str | None:
