@@ -2,7 +2,7 @@
 
 Each ``*_check`` function runs one check and returns a :class:`Check`: what was measured, the independent reference
 (an analytic solution or a conservation law), their relative error and the tolerance the test suite holds it to.
-The set-ups are those of the tests -- fulldem's collective settling from :mod:`fulldem.verification`, popbal's
+The set-ups are those of the tests -- fulldem's collective settling from :mod:`fulldem.cases`, popbal's
 Smoluchowski solutions from :mod:`popbal.smoluchowski` -- so the report shows the numbers the tests assert.
 
 * **Stokes**: a single droplet in quiescent slag (fulldem) reaches the terminal velocity of the case's drag law
@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 import pandas as pd
+
 
 #: Case overrides of popbal's single-size checks: one size, no coalescence, no channel, no hindering, Stokes drag.
 SINGLE_SIZE = {"feed.scale_std": 0.0, "coalescence.enabled": False, "popbal.channel_feed_fraction": 0.0,
@@ -123,7 +124,7 @@ def popbal_stokes_check(tolerance=1e-6) -> Check:
 def hindered_check(phi, t_end=4.0, tolerance=0.15, **setup) -> Check:
     """fulldem: the front of a uniform suspension at volume fraction ``phi`` (the box of ``setup``, default 36 x 36
     x 72 mm) descends from 1 s to ``t_end`` [s] at the Richardson-Zaki velocity."""
-    from fulldem.verification import check_hindered
+    from fulldem.cases.suspensions import check_hindered
     from settler.physics import richardson_zaki_factor
 
     clock = time.perf_counter()
@@ -139,7 +140,7 @@ def hindered_check(phi, t_end=4.0, tolerance=0.15, **setup) -> Check:
 def homogeneous_check(phi, tolerance=0.15) -> Check:
     """fulldem: a random suspension in a periodic 48 mm cube settles, in the frame of zero volume flux, at the
     Richardson-Zaki velocity (mean over 0.5-1.5 s)."""
-    from fulldem.verification import check_homogeneous
+    from fulldem.cases.suspensions import check_homogeneous
 
     clock = time.perf_counter()
     sim, u_rz, speeds = check_homogeneous(phi)
@@ -151,9 +152,9 @@ def homogeneous_check(phi, tolerance=0.15) -> Check:
 
 # ---------------------------------------------------------------------------------------------------- falling cloud
 def cloud_check(n_a_over_r=4.0, tolerance=0.25, **setup) -> Check:
-    """fulldem: the centroid of a falling cloud (:func:`fulldem.verification.falling_cloud`, ``setup`` its keywords)
+    """fulldem: the centroid of a falling cloud (:func:`fulldem.cases.cloud.falling_cloud`, ``setup`` its keywords)
     from 5 to 8 viscous times R^2/nu, against U_St (1 + 1.2 N a/R - 2.837 N a/L)."""
-    from fulldem.verification import check_cloud
+    from fulldem.cases.cloud import check_cloud
 
     clock = time.perf_counter()
     cloud, speed, fallen, spread = check_cloud(n_a_over_r, **setup)
@@ -172,7 +173,7 @@ def torus_run(n_a_over_r=5.0, duration=14.0, reynolds=1.0, snapshots=6, seed=7, 
     [s], fall distance [R], unwrapped positions (N, 3) [m]) evenly spaced in time)."""
     from tqdm import tqdm
 
-    from fulldem.verification import Unwrapper, falling_cloud
+    from fulldem.cases.cloud import Unwrapper, falling_cloud
 
     cloud = falling_cloud(n_a_over_r, diameter=1e-3, reynolds=reynolds, seed=seed)
     sim = cloud.sim

@@ -39,9 +39,12 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from fulldem import contacts
-from fulldem import dem
+from fulldem.dem import diagnostics
+from fulldem.dem import laws as contacts
+from fulldem.dem import records
+from fulldem.dem import stepper as dem_stepper
 from fulldem.droplets import DropletStore
+
 
 HERE = Path(__file__).resolve().parent
 
@@ -67,14 +70,14 @@ def run_dem(store, steps, h, box_size, stiffness_ref, diameter_ref, restitution,
     (list builds during the loop), ``kinetic_energy`` {step: J} at ``report_steps``, ``max_overlap_ratio``,
     ``impulse`` (the drag impulses, (n, 3) [N s], if tracked) and the ``stepper``.
     """
-    stepper = dem.DemStepper(store, (0.0, 0.0, 0.0), box_size, (False, False, False), h, stiffness_ref,
+    stepper = dem_stepper.DemStepper(store, (0.0, 0.0, 0.0), box_size, (False, False, False), h, stiffness_ref,
                              diameter_ref, restitution, skin, body_acceleration, wall_restitution=wall_restitution,
                              half_list=half_list)
     stepper.droplets_changed()
     n = store.count
     stepper.set_drag(3.0 * math.pi * viscosity * store.diameter)
     still = np.zeros((1, 3))
-    impulse = np.zeros((store.capacity, 3)) if track_impulse else dem.NO_IMPULSE
+    impulse = np.zeros((store.capacity, 3)) if track_impulse else dem_stepper.NO_IMPULSE
     builds_before = stepper.neighbours.builds
     energies = {}
     loop = 0.0
@@ -86,7 +89,7 @@ def run_dem(store, steps, h, box_size, stiffness_ref, diameter_ref, restitution,
         loop += time.perf_counter() - t0
         done = max(done, target)
         if target in report:
-            energies[target] = dem.kinetic_energy(store.velocity, stepper.mass, n)
+            energies[target] = diagnostics.kinetic_energy(store.velocity, stepper.mass, n)
     return {"loop_seconds": loop, "rebuilds": stepper.neighbours.builds - builds_before,
             "kinetic_energy": energies, "max_overlap_ratio": stepper.max_overlap_ratio,
             "impulse": impulse[:n] if track_impulse else None, "stepper": stepper}
@@ -172,7 +175,7 @@ def _sorted(pos):
 
 
 # ------------------------------------------------------------------------------------------------ our run
-@njit(cache=True, parallel=True, fastmath=dem.FASTMATH)
+@njit(cache=True, parallel=True, fastmath=records.FASTMATH)
 def _explicit_drag(velocity, drag, count, force):
     """Add -drag * v (half-step velocity) to the force, as LIGGGHTS's fix viscous does."""
     for p in prange(count):
@@ -206,16 +209,16 @@ def run_ours(pos, steps, drag="exact", half_list=True, track_impulse=False):
     builds = stepper.neighbours.builds
     for target in report + [steps]:
         t0 = time.perf_counter()
-        stepper.advance(target - done, still, dem.NO_IMPULSE)
+        stepper.advance(target - done, still, dem_stepper.NO_IMPULSE)
         loop += time.perf_counter() - t0
         done = max(done, target)
         if target in report:
-            energies[target] = dem.kinetic_energy(store.velocity, stepper.mass, n)
+            energies[target] = diagnostics.kinetic_energy(store.velocity, stepper.mass, n)
     return {"loop_seconds": loop, "rebuilds": stepper.neighbours.builds - builds, "kinetic_energy": energies,
             "max_overlap_ratio": stepper.max_overlap_ratio, "stepper": stepper}
 
 
-class ExplicitDragStepper(dem.DemStepper):
+class ExplicitDragStepper(dem_stepper.DemStepper):
     """Our stepper with the drag as an explicit force -gamma v (LIGGGHTS's fix viscous) instead of the exact step."""
 
     def compute_forces(self):

@@ -17,8 +17,11 @@ import time
 
 import numpy as np
 
-from fulldem import fluid
-from fulldem.grid import Grid
+from fulldem import boundaries
+from fulldem.fluid import solver
+from fulldem.fluid import walls as fluid_walls
+from fulldem.fluid.grid import Grid
+
 
 DENSITY = 3150.0
 VISCOSITY = 0.45
@@ -35,7 +38,7 @@ def plume_force(grid, centre, radius, strength):
 
 def plume_state(grid, centre, width, speed):
     """Rest state plus a Gaussian downward jet w = -speed exp(-r^2 / (2 width^2)) on the interior z-faces."""
-    state = fluid.rest_state(grid)
+    state = solver.rest_state(grid)
     x, y = grid.cell_centres(0), grid.cell_centres(1)
     r2 = (x[:, None] - centre[0]) ** 2 + (y[None, :] - centre[1]) ** 2
     state.w[:, :, 1:-1] = -speed * np.exp(-r2 / (2.0 * width**2))[:, :, None]
@@ -65,12 +68,12 @@ def run(name, grid, boundary, force, initial, steps, variable_eps):
     state = initial
     dt = 2e-3
     for _ in range(3):  # compile and spin up
-        state, _ = fluid.step(grid, state, boundary, DENSITY, VISCOSITY, dt, eps_faces=eps, particle_flux=flux,
+        state, _ = solver.step(grid, state, boundary, DENSITY, VISCOSITY, dt, eps_faces=eps, particle_flux=flux,
                               force=force)
     iterations = []
     start = time.perf_counter()
     for _ in range(steps):
-        state, diagnostics = fluid.step(grid, state, boundary, DENSITY, VISCOSITY, dt, eps_faces=eps,
+        state, diagnostics = solver.step(grid, state, boundary, DENSITY, VISCOSITY, dt, eps_faces=eps,
                                         particle_flux=flux, force=force)
         iterations.append(diagnostics.pressure_iterations)
     elapsed = (time.perf_counter() - start) / steps
@@ -87,12 +90,12 @@ def main():
     args = parser.parse_args()
 
     cubic = Grid.for_box((0.2, 0.2, 0.2), 0.005)
-    cubic_boundary = fluid.make_boundary(cubic, inlet=fluid.InletDisk((0.1, 0.1), 0.075),
-                                         outlet=fluid.OutletDisk("x+", (0.1, 0.03), 0.0075),
+    cubic_boundary = fluid_walls.make_boundary(cubic, inlet=boundaries.InletDisk((0.1, 0.1), 0.075),
+                                         outlet=boundaries.OutletDisk("x+", (0.1, 0.03), 0.0075),
                                          inflow_flux=0.022 / DENSITY)
     deep = Grid.for_box((0.1, 0.1, 0.5), 0.005)
-    deep_boundary = fluid.make_boundary(deep, inlet=fluid.InletDisk((0.05, 0.05), 0.01),
-                                        outlet=fluid.OutletDisk("x+", (0.05, 0.03), 0.005),
+    deep_boundary = fluid_walls.make_boundary(deep, inlet=boundaries.InletDisk((0.05, 0.05), 0.01),
+                                        outlet=boundaries.OutletDisk("x+", (0.05, 0.03), 0.005),
                                         inflow_flux=0.00038 / DENSITY)
     for variable_eps in (False, True):
         run("cubic", cubic, cubic_boundary, plume_force(cubic, (0.1, 0.1), 0.03, 200.0),

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from fulldem.driver import restore_state
-from fulldem.io import load_checkpoint
+from fulldem.io.checkpoint import load_checkpoint
 from fulldem.stepper import Simulation
 from settler.cases import load_case
 

@@ -31,7 +31,7 @@ from settler.output import read_time_series
 @dataclass(frozen=True)
 class Setup:
     """What a run needs besides its output folder: the resolved ``case``, an optional initial ``droplets`` list
-    (CSV path, see :mod:`fulldem.droplet_list`) and ``feed`` (None: on when feed.mass_rate > 0)."""
+    (CSV path, see :mod:`fulldem.io.droplet_list`) and ``feed`` (None: on when feed.mass_rate > 0)."""
 
     case: Case
     droplets: str | os.PathLike | None = None

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+
 #: Side codes of a side wall, by the case file's name (geometry.outlet_side).
 SIDES = {"x-": 0, "x+": 1, "y-": 2, "y+": 3}
 SIDE_NAMES = {code: name for name, code in SIDES.items()}
@@ -30,6 +31,25 @@ def side_axis(code: int) -> int:
 def side_is_upper(code: int) -> bool:
     """Whether side ``code`` is the upper wall of its axis (x+, y+)."""
     return int(code) % 2 == 1
+
+
+class InletDisk(NamedTuple):
+    """A velocity inlet on the top wall: disk centre (x, y) [m] and radius [m]."""
+
+    centre: tuple[float, float]
+    radius: float
+
+
+class OutletDisk(NamedTuple):
+    """A mass-balanced outflow disk on a side wall.
+
+    side: 'x-', 'x+', 'y-' or 'y+'; centre: (transverse, height) [m], transverse = y on x walls, x on y walls,
+    height = z; radius [m].
+    """
+
+    side: str
+    centre: tuple[float, float]
+    radius: float
 
 
 class Inlet(NamedTuple):
@@ -59,13 +79,12 @@ class Outlet(NamedTuple):
         return SIDE_NAMES[self.side]
 
     def fluid_disk(self):
-        """The fluid solver's form (:class:`fulldem.fluid.OutletDisk`)."""
-        from .fluid import OutletDisk
+        """The fluid solver's form (:class:`fulldem.boundaries.OutletDisk`)."""
 
         return OutletDisk(self.side_name, (self.transverse, self.height), self.radius)
 
     def exit_args(self) -> tuple:
-        """(side, plane, transverse, height, radius): the arguments of :func:`fulldem.feeding.classify_exits`."""
+        """(side, plane, transverse, height, radius): the arguments of :func:`fulldem.submodels.exits.classify_exits`."""
         return (self.side, self.plane, self.transverse, self.height, self.radius)
 
     def contact_args(self) -> tuple:
@@ -92,13 +111,12 @@ class Boundaries(NamedTuple):
     absorbing_bottom: bool
 
     def fluid_inlet(self):
-        """The fluid solver's velocity inlet (:class:`fulldem.fluid.InletDisk`), or None without slag inflow."""
-        from .fluid import InletDisk
+        """The fluid solver's velocity inlet (:class:`fulldem.boundaries.InletDisk`), or None without slag inflow."""
 
         return InletDisk(self.inlet.centre, self.inlet.radius) if self.slag_inlet else None
 
     def fluid_outlet(self):
-        """The fluid solver's outflow disk (:class:`fulldem.fluid.OutletDisk`), or None."""
+        """The fluid solver's outflow disk (:class:`fulldem.boundaries.OutletDisk`), or None."""
         return self.outlet.fluid_disk() if self.outlet is not None else None
 
     def contact_outlet(self):
@@ -106,7 +124,7 @@ class Boundaries(NamedTuple):
         return self.outlet.contact_args() if self.outlet is not None else None
 
     def exit_args(self) -> tuple:
-        """(bottom, side, plane, transverse, height, radius) for :func:`fulldem.feeding.classify_exits` (bottom
+        """(bottom, side, plane, transverse, height, radius) for :func:`fulldem.submodels.exits.classify_exits` (bottom
         -inf where the bottom does not absorb)."""
         bottom = float(self.lower[2]) if self.absorbing_bottom else -np.inf
         return (bottom, *(self.outlet.exit_args() if self.outlet is not None else NO_OUTLET_EXIT_ARGS))

@@ -14,7 +14,7 @@ Outputs in DIR (all written atomically):
   ``last_good.npz``, the state at the last time-series row before the failure (same format as a checkpoint).
 
 A run can start from a droplet list (CSV with columns x, y, z, diameter and optionally density; SI units; header
-line required; see :mod:`fulldem.droplet_list`) with the feed off: ``--droplets FILE --no-feed``.
+line required; see :mod:`fulldem.io.droplet_list`) with the feed off: ``--droplets FILE --no-feed``.
 
 Stopping and resuming. SIGINT (Ctrl-C) and SIGTERM (what a batch scheduler sends) end the step under way, write
 ``checkpoint.npz`` and the time series, and stop the run with :class:`RunInterrupted` (the command exits 130 or 143
@@ -39,18 +39,21 @@ import numpy as np
 
 from settler.cases import CaseError, load_case
 from settler.output import (OutputError, atomic_write_text, mass_balance_error, prepare_output_folder,
-                            read_channel_profile, read_time_series, time_series_frame, to_json,
-                            write_channel_profile, write_run_metadata, write_time_series)
+                            read_channel_profile, read_time_series, time_series_frame, to_json, write_channel_profile,
+                            write_run_metadata, write_time_series)
 
-from . import channel
-from . import fluid as fl
-from .coalescence import size_table_frame
-from .coupling import filtered_width_allowed
+from .coupling.filtered import filtered_width_allowed
 from .droplets import MERGED
-from .droplet_list import DropletListError, read_droplet_list
-from .io import CheckpointError, Progress, SnapshotWriter, load_checkpoint, save_checkpoint
+from .fluid import solver as fl
+from .io import channel
+from .io.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from .io.droplet_list import DropletListError, read_droplet_list
+from .io.progress import Progress
+from .io.snapshots import SnapshotWriter
 from .stepper import Counters, Simulation
-from .submodels import missing_submodels
+from .submodels.base import missing_submodels
+from .submodels.coalescence import size_table_frame
+
 
 #: Case keys that control how a run is carried out, not what it computes: they may differ between a checkpoint and
 #: the case that resumes it (section, key).
@@ -320,7 +323,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     """Run ``case`` into ``out_dir``; returns the time series (pandas DataFrame).
 
     end_time [s] overrides fulldem.end_time; resume continues from out_dir/checkpoint.npz (only with the case it was
-    written with); droplets: a CSV path (see :func:`fulldem.droplet_list.read_droplet_list`) for the initial
+    written with); droplets: a CSV path (see :func:`fulldem.io.droplet_list.read_droplet_list`) for the initial
     droplets; feed: force the feed on/off; overwrite: replace another run's files in out_dir (else refused);
     command: the command line, recorded in metadata.json. Raises :class:`RunError` (and :class:`RunInterrupted` on
     SIGINT / SIGTERM, after saving a checkpoint) or :class:`settler.cases.CaseError`.
@@ -469,7 +472,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     frame = time_series_frame(rows)
     write_time_series(frame, out / "timeseries.csv")
     save_checkpoint_now()
-    from .plots import plot_droplets, plot_time_series
+    from .io.plots import plot_droplets, plot_time_series
 
     n = sim.store.count
     plot_time_series(out, f"{case.case.name}: fulldem")

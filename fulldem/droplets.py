@@ -16,7 +16,7 @@ Arrays and units:
 * ``position`` (cap, 3) [m] centre; ``velocity`` (cap, 3) [m/s];
 * ``diameter`` (cap,) [m] current diameter; ``density`` (cap,) [kg/m^3];
 * ``contact_diameter`` (cap,) [m] the diameter the contacts see: ``diameter``, except for a droplet marked for
-  coalescence, which grows it toward its target (fulldem.coalescence). Grown sizes are for contacts only: volume,
+  coalescence, which grows it toward its target (fulldem.submodels.coalescence). Grown sizes are for contacts only: volume,
   mass, buoyancy, drag and the coupling use ``diameter``;
 * ``original_diameter`` (cap,) [m] diameter at the feed composition (Cu2S mass is proportional to its cube);
 * ``age`` (cap,) [s] time since feeding (reaction submodel);
@@ -27,9 +27,10 @@ Arrays and units:
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from settler.physics import merged_diameter_v
+
 
 #: Flag bit: the droplet is marked for coalescence with ``partner`` (they no longer repel each other).
 COALESCING = 1
@@ -237,7 +238,6 @@ class DropletStore:
         Every field moves with its droplet; coalescence partners are re-pointed to the new indices. Per-droplet arrays
         held elsewhere must be permuted with the same ``order`` (``array[:n] = array[order]``).
         """
-        from .neighbours import permute_rows
 
         n = self.count
         order = np.asarray(order, dtype=np.int64)
@@ -289,6 +289,28 @@ class DropletStore:
     def mass(self) -> np.ndarray:
         """Masses of the live droplets [kg]."""
         return self.density[: self.count] * self.volume()
+
+
+@njit(cache=True, parallel=True)
+def _gather_1d(source, order, out):
+    for p in prange(order.shape[0]):
+        out[p] = source[order[p]]
+
+
+@njit(cache=True, parallel=True)
+def _gather_2d(source, order, out):
+    for p in prange(order.shape[0]):
+        q = order[p]
+        for a in range(source.shape[1]):
+            out[p, a] = source[q, a]
+
+
+def permute_rows(array, order) -> None:
+    """``array[:n] = array[order]`` for n = len(order), gathered in parallel (1-D or 2-D arrays)."""
+    n = order.shape[0]
+    work = np.empty((n,) + array.shape[1:], dtype=array.dtype)
+    (_gather_1d if array.ndim == 1 else _gather_2d)(array, order, work)
+    array[:n] = work
 
 
 @njit(cache=True)

@@ -35,85 +35,31 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit, prange
 
 from settler.derived import settling_velocity
-from settler.physics import HINDRANCE, STANDARD_GRAVITY, FeedSchedule
+from settler.physics import DRAG_LAWS, HINDRANCE, STANDARD_GRAVITY, FeedSchedule
 
-from . import coupling as cp
-from . import fluid as fl
-from .contacts import effective_mass, stable_step, stiffness_for_overlap
-from .dem import DemStepper, droplet_masses, max_speed
-from .droplets import DropletStore
 from .boundaries import boundaries_for
-from .coalescence import empty_size_table
-from .feeding import classify_exits, draw_inlet_candidates, place_without_overlap
-from .forces import DRAG_LAWS, drag_coefficients
-from .grid import Grid
-from .submodels import submodels_for
+from .coupling import filtered, mobility, smoothing
+from .coupling.drag import drag_coefficients
+from .coupling.exchange import (DEPOSIT_COMPONENTS, INTERPOLATE_COMPONENTS, drift_rows, forcing_rows, owed_rows,
+                                start_rows)
+from .dem.diagnostics import droplet_masses, max_speed
+from .dem.laws import effective_mass, stable_step, stiffness_for_overlap
+from .dem.stepper import DemStepper
+from .droplets import DropletStore
+from .fluid import solver
+from .fluid import walls as fluid_walls
+from .fluid.grid import Grid
+from .submodels.base import submodels_for
+from .submodels.coalescence import empty_size_table
+from .submodels.exits import classify_exits
+from .submodels.feed import draw_inlet_candidates, place_without_overlap
 from .tuning import SKIN_MIN, SORT_INTERVAL, skin_for
+
 
 #: Ratios sigma/h at which the grid's self-mobility factor is tabulated (see fulldem.coupling).
 MOBILITY_RATIOS = np.array([0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0])
-
-
-#: Quantities deposited at x^n before the fluid step, by array: volume on the three face arrays and the cells, then
-#: the volume flux on the faces (one stencil computation per droplet for all seven).
-DEPOSIT_COMPONENTS = np.array([0, 1, 2, 3, 0, 1, 2], dtype=np.int64)
-#: Fields interpolated at x^n after the fluid step: fluid velocity and pressure force on the faces, volume fraction
-#: at the cells.
-INTERPOLATE_COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 3], dtype=np.int64)
-
-
-@njit(cache=True, parallel=True)
-def start_rows(position, diameter, velocity, count, inv_cell_volume, start_position, volume, values):
-    """Per droplet at x^n: start_position = position [m], volume [m^3], and the deposit rows (DEPOSIT_COMPONENTS):
-    volume / cell volume on the three face arrays and the cells, times the velocity for the flux rows."""
-    for p in prange(count):
-        vol = math.pi / 6.0 * diameter[p] ** 3
-        volume[p] = vol
-        share = vol * inv_cell_volume
-        for r in range(4):
-            values[r, p] = share
-        for a in range(3):
-            values[4 + a, p] = share * velocity[p, a]
-            start_position[p, a] = position[p, a]
-
-
-@njit(cache=True, parallel=True)
-def forcing_rows(seen, own, volume, mass, fluid_density, gravity, inv_cell_volume, count, fluid_velocity, external,
-                 eps_around):
-    """From the interpolated rows (INTERPOLATE_COMPONENTS): fluid velocity [m/s]; external force [N] = volume x
-    pressure-force density + buoyant weight (m - rho_f V) g; void fraction around the droplet, its own volume
-    share (``own``, the weight at its centre) removed, clipped to [0, 1]."""
-    for p in prange(count):
-        vol = volume[p]
-        buoyant = mass[p] - fluid_density * vol
-        for a in range(3):
-            fluid_velocity[p, a] = seen[a, p]
-            external[p, a] = vol * seen[3 + a, p] + buoyant * gravity[a]
-        eps = 1.0 - (seen[6, p] - own[p] * vol * inv_cell_volume)
-        eps_around[p] = min(max(eps, 0.0), 1.0)
-
-
-@njit(cache=True, parallel=True)
-def drift_rows(fluid_velocity, external, beta, count, drift_velocity, impulse):
-    """drift velocity u + F/beta [m/s] (what the DEM sub-steps see) and a zeroed impulse accumulator [N s]."""
-    for p in prange(count):
-        for a in range(3):
-            drift_velocity[p, a] = fluid_velocity[p, a] + external[p, a] / beta[p]
-            impulse[p, a] = 0.0
-
-
-@njit(cache=True, parallel=True)
-def owed_rows(impulse, external, duration, count, scale, values):
-    """Drag impulse J = DEM impulse - F duration [N s] (the external force was folded into the drift velocity), and
-    the rows ``values[a] = scale J_a`` the fluid is owed."""
-    for p in prange(count):
-        for a in range(3):
-            j = impulse[p, a] - external[p, a] * duration
-            impulse[p, a] = j
-            values[a, p] = scale * j
 
 
 @dataclass
@@ -121,7 +67,7 @@ class Counters:
     """Matte mass bookkeeping [kg] and event counts since t = 0 (``recreated``: the stepped reaction's changes of
     material); ``merges_reported``: ``merges`` at the last
     time-series row; ``merges_by_size``: merges by the size bins of the two droplets
-    (:func:`fulldem.coalescence.size_bin`, smaller first)."""
+    (:func:`fulldem.submodels.coalescence.size_bin`, smaller first)."""
 
     mass_fed: float = 0.0
     mass_settled: float = 0.0
@@ -194,9 +140,9 @@ class Simulation:
         self.bounds = boundaries_for(case, self.lower, self.upper, periodic, slag_inlet=use_inlet,
                                      outlet=use_outlet,
                                      absorbing_bottom=(not periodic[2]) if absorbing_bottom is None else absorbing_bottom)
-        self.boundary = fl.make_boundary(self.grid, inlet=self.bounds.fluid_inlet(),
+        self.boundary = fluid_walls.make_boundary(self.grid, inlet=self.bounds.fluid_inlet(),
                                          outlet=self.bounds.fluid_outlet(), inflow_flux=self.bounds.inflow_flux)
-        self.fluid = fl.rest_state(self.grid)
+        self.fluid = solver.rest_state(self.grid)
 
         # feed
         f = case.feed
@@ -227,23 +173,23 @@ class Simulation:
                               sort_on_rebuild=False, record_first_contacts=case.coalescence.enabled)
 
         # coupling tables and work arrays
-        self.kernel = (fd.sigma_cells, fd.sigma_diameter, cp.DEFAULT_CUT)
+        self.kernel = (fd.sigma_cells, fd.sigma_diameter, smoothing.DEFAULT_CUT)
         self.filtered = None
         self.mobility_ratios = MOBILITY_RATIOS
         if fd.kernel == "filtered":
             try:
-                self.filtered = cp.FilteredKernel(self.grid.shape, self.periodic, fd.sigma_cells, cp.DEFAULT_CUT)
+                self.filtered = filtered.FilteredKernel(self.grid.shape, self.periodic, fd.sigma_cells, smoothing.DEFAULT_CUT)
             except ValueError as error:
                 raise ValueError(f"fulldem.kernel = 'filtered' with fulldem.sigma_cells = {fd.sigma_cells} on a "
                                  f"{self.grid.shape} grid: {error}; use fulldem.kernel = 'direct'") from None
             # the filtered kernel's own discrete factor at sigma = sigma_cells h; wider droplets use the direct one
             wider = MOBILITY_RATIOS[MOBILITY_RATIOS > fd.sigma_cells * (1.0 + 1e-9)]
             self.mobility_ratios = np.concatenate([[fd.sigma_cells], wider])
-            self.mobility = np.array([cp.filtered_mobility_factor(fd.sigma_cells)]
-                                     + [cp.discrete_mobility_factor(r) for r in wider])
+            self.mobility = np.array([filtered.filtered_mobility_factor(fd.sigma_cells)]
+                                     + [mobility.discrete_mobility_factor(r) for r in wider])
         else:
-            self.mobility = np.array([cp.discrete_mobility_factor(r) for r in MOBILITY_RATIOS])
-        self.oseen_logs, self.oseen_values = cp.oseen_table()
+            self.mobility = np.array([mobility.discrete_mobility_factor(r) for r in MOBILITY_RATIOS])
+        self.oseen_logs, self.oseen_values = mobility.oseen_table()
         self.drag_law = DRAG_LAWS[case.drag.law]
         self.viscosity_ratio = case.matte.viscosity / self.viscosity if case.drag.fluid_drop else 0.0
         self.eps_old = None
@@ -262,7 +208,7 @@ class Simulation:
         self.interpolated = np.zeros((len(INTERPOLATE_COMPONENTS), capacity))
         self.own = np.zeros(capacity)
         self.eps_around = np.ones(capacity)
-        self.table = cp.stencil_table(capacity)  # the droplets' stencils at x^n, shared by the step's three passes
+        self.table = smoothing.stencil_table(capacity)  # the droplets' stencils at x^n, shared by the step's three passes
         self.impulse = np.zeros((capacity, 3))
         self.external = np.zeros((capacity, 3))
         self.volume = np.zeros(capacity)
@@ -291,10 +237,10 @@ class Simulation:
 
     def _scratch_for(self, m):
         nx, ny, nz = self.grid.shape
-        size = cp.thread_count() * m * (nx + 1) * (ny + 1) * (nz + 1)
+        size = smoothing.thread_count() * m * (nx + 1) * (ny + 1) * (nz + 1)
         if getattr(self, "_scratch", np.zeros(0)).size < size:
             self._scratch = np.zeros(size)  # work array for every deposit; its chunks are zeroed by the kernel
-        return self._scratch[:size].reshape(cp.thread_count(), m, nx + 1, ny + 1, nz + 1)
+        return self._scratch[:size].reshape(smoothing.thread_count(), m, nx + 1, ny + 1, nz + 1)
 
     def _persistent(self, key, shape, zero=False):
         """A work array of the filtered kernel kept between steps, zeroed on request."""
@@ -305,13 +251,13 @@ class Simulation:
             array[...] = 0.0
         return array
 
-    def deposit_many(self, positions, values, components, outs, mode=cp.COMPUTE):
+    def deposit_many(self, positions, values, components, outs, mode=smoothing.COMPUTE):
         """Add rows of ``values`` (m, cap), deposited with the coupling kernel, to the arrays ``outs`` (m arrays, of
         ``components``: 0-2 faces, 3 cells), one pass; ``mode``: with the stencil table (see
-        :func:`fulldem.coupling.droplet_stencils`). Returns ``outs``."""
+        :func:`fulldem.coupling.smoothing.droplet_stencils`). Returns ``outs``."""
         s, n, m = self.store, self.store.count, len(components)
         if self.filtered is None:
-            cp.deposit_many(positions, s.diameter, values, n, components, tuple(outs), *self._grid_args(),
+            smoothing.deposit_many(positions, s.diameter, values, n, components, tuple(outs), *self._grid_args(),
                             *self.kernel, self._scratch_for(m), *self.table, mode)
             return outs
         wide = self._wide()
@@ -321,35 +267,35 @@ class Simulation:
             narrow[:, wide] = 0.0
         raws = [self._persistent(("raw", k), out.shape, zero=True) for k, out in enumerate(outs)]
         # trilinear weights are cheaper to recompute than to load from the stencil table (measured 2x)
-        cp.cic_deposit_many(positions, narrow, n, components, tuple(raws), *self._grid_args(), self._scratch_for(m))
+        smoothing.cic_deposit_many(positions, narrow, n, components, tuple(raws), *self._grid_args(), self._scratch_for(m))
         for raw, out, c in zip(raws, outs, components):
             out += self.filtered.filter(raw, c)
         if wide.size:
-            cp.deposit_many(np.ascontiguousarray(positions[wide]), np.ascontiguousarray(s.diameter[wide]),
+            smoothing.deposit_many(np.ascontiguousarray(positions[wide]), np.ascontiguousarray(s.diameter[wide]),
                             np.ascontiguousarray(values[:, wide]), wide.size, components, tuple(outs),
-                            *self._grid_args(), *self.kernel, self._scratch_for(m), *cp.NO_TABLE, cp.COMPUTE)
+                            *self._grid_args(), *self.kernel, self._scratch_for(m), *smoothing.NO_TABLE, smoothing.COMPUTE)
         return outs
 
-    def interpolate_many(self, positions, fields, components, out, own=cp.NO_OWN, mode=cp.COMPUTE):
+    def interpolate_many(self, positions, fields, components, out, own=smoothing.NO_OWN, mode=smoothing.COMPUTE):
         """out[k, p] = the coupling kernel's interpolation of ``fields[k]`` (of ``components``) at droplet p; with
         ``own`` (cap,), also each droplet's self weight sum_cells w_p^2. Returns ``out``."""
         s, n = self.store, self.store.count
         if self.filtered is None:
-            cp.interpolate_many(positions, s.diameter, n, components, tuple(fields), out, own, *self._grid_args(),
+            smoothing.interpolate_many(positions, s.diameter, n, components, tuple(fields), out, own, *self._grid_args(),
                                 *self.kernel, *self.table, mode)
             return out
         filtered = tuple(self.filtered.filter(f, c, out=self._persistent(("filtered", k), f.shape))
                          for k, (f, c) in enumerate(zip(fields, components)))
-        cp.cic_interpolate_many(positions, n, components, filtered, out, *self._grid_args())
+        smoothing.cic_interpolate_many(positions, n, components, filtered, out, *self._grid_args())
         if own.shape[0]:
             self.filtered.self_weight(positions, n, self.grid.spacing, self.lower, own)
         wide = self._wide()
         if wide.size:
             part = np.zeros((len(components), wide.size))
-            part_own = np.zeros(wide.size) if own.shape[0] else cp.NO_OWN
-            cp.interpolate_many(np.ascontiguousarray(positions[wide]), np.ascontiguousarray(s.diameter[wide]),
+            part_own = np.zeros(wide.size) if own.shape[0] else smoothing.NO_OWN
+            smoothing.interpolate_many(np.ascontiguousarray(positions[wide]), np.ascontiguousarray(s.diameter[wide]),
                                 wide.size, components, tuple(fields), part, part_own, *self._grid_args(),
-                                *self.kernel, *cp.NO_TABLE, cp.COMPUTE)
+                                *self.kernel, *smoothing.NO_TABLE, smoothing.COMPUTE)
             out[:, wide] = part
             if own.shape[0]:
                 own[wide] = part_own
@@ -443,7 +389,7 @@ class Simulation:
             # partners ahead in memory (see NeighbourList.spatial_order)
             self.dem.neighbours.skin = self.skin_for(max_speed(s.velocity, s.count))
             # droplets appended at the inlet (or moved into the holes of exits) would otherwise lie far in memory
-            # from their neighbours, which cuts the parallel slabs of the DEM kernels to one (fulldem.dem.slab_count)
+            # from their neighbours, which cuts the parallel slabs of the DEM kernels to one (fulldem.dem.pairs.slab_count)
             s.reorder(self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
         # the DEM is set up at the first step even without droplets (a run may start empty and feed later)
         rebuilt = not self.dem.ready
@@ -461,12 +407,12 @@ class Simulation:
         faces = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
         phi_cells = self.grid.zeros_cells()
         flux = [np.zeros(self.grid.face_shape(a)) for a in range(3)]
-        self.deposit_many(s.position, values, DEPOSIT_COMPONENTS, faces + [phi_cells] + flux, cp.STORE)
+        self.deposit_many(s.position, values, DEPOSIT_COMPONENTS, faces + [phi_cells] + flux, smoothing.STORE)
         deposited_version = s.version  # the stencil table and start rows are per droplet: see the check below
         eps_faces = [np.subtract(1.0, f, out=f) for f in faces]
         if min(float(e.min()) for e in eps_faces) <= 0.0:
             raise FloatingPointError("void fraction reached zero on a face: droplets overfill a cell")
-        state, fdiag = fl.step(self.grid, self.fluid, self.boundary, self.density, self.viscosity, self.dt,
+        state, fdiag = solver.step(self.grid, self.fluid, self.boundary, self.density, self.viscosity, self.dt,
                                eps_faces=eps_faces, particle_flux=flux, force=self.owed_force,
                                body_force=self.body_force, eps_faces_old=self.eps_old,
                                advection="koren" if fd.advection else "none")
@@ -475,11 +421,11 @@ class Simulation:
         self.momentum_eps = eps_faces
 
         # what the droplets feel, interpolated at x^n with the deposition weights, one pass
-        pressure_force = fl.pressure_force_density(self.grid, state.p, self.body_force)
+        pressure_force = solver.pressure_force_density(self.grid, state.p, self.body_force)
         droplet_masses(s.diameter, s.density, n, self.mass)
         seen = self.interpolated
         self.interpolate_many(s.position, (state.u, state.v, state.w, *pressure_force, phi_cells),
-                              INTERPOLATE_COMPONENTS, seen, self.own, cp.LOAD)
+                              INTERPOLATE_COMPONENTS, seen, self.own, smoothing.LOAD)
         eps_around = self.eps_around
         forcing_rows(seen, self.own, volume, self.mass, self.density, self.gravity, inv_cell_volume, n,
                      self.fluid_velocity, self.external, eps_around)
@@ -505,7 +451,7 @@ class Simulation:
             raise RuntimeError("stepper: droplets were added, removed or reordered between the step's deposits; the "
                                "droplet set may change only at the step's event points (see the module docstring)")
         self.owed_force = self.deposit_many(self.start_position, values[:3], INTERPOLATE_COMPONENTS[:3],
-                                            [np.zeros(self.grid.face_shape(a)) for a in range(3)], cp.LOAD)
+                                            [np.zeros(self.grid.face_shape(a)) for a in range(3)], smoothing.LOAD)
         self.time += self.dt
         self.steps += 1
         self.apply_events()
@@ -527,7 +473,7 @@ class Simulation:
 
     def apply_events(self):
         """The end-of-step event point, after the owed drag is deposited: each submodel's ``at_end`` in order
-        (:func:`fulldem.submodels.submodels_for`: merges, the case's submodels, exits)."""
+        (:func:`fulldem.submodels.base.submodels_for`: merges, the case's submodels, exits)."""
         for submodel in self.submodels:
             submodel.at_end(self)
 
@@ -558,8 +504,8 @@ class Simulation:
         s, n = self.store, self.store.count
         mass = s.density[:n] * math.pi / 6.0 * s.diameter[:n] ** 3
         droplets = (mass[:, None] * s.velocity[:n]).sum(axis=0)
-        fluid = fl.total_momentum(self.grid, self.fluid, self.density, getattr(self, "momentum_eps", None))
-        owed = np.array([float(np.sum(self.owed_force[a][fl._unique_faces(self.grid, a)])) for a in range(3)])
+        fluid = solver.total_momentum(self.grid, self.fluid, self.density, getattr(self, "momentum_eps", None))
+        owed = np.array([float(np.sum(self.owed_force[a][solver._unique_faces(self.grid, a)])) for a in range(3)])
         return fluid + droplets + owed * self.dt * self.grid.cell_volume
 
     def backlog_mass(self):

@@ -3,7 +3,7 @@
 #
 # Both engines against independent references: analytic solutions (Stokes with the wall factor, Richardson-Zaki,
 # Nitsche-Batchelor less Hasimoto's periodic images, the Smoluchowski solutions of Scott and McLeod, the through-flow
-# share w / (u + w)) and conservation of mass. The set-ups are the tests' (`fulldem/verification.py`,
+# share w / (u + w)) and conservation of mass. The set-ups are the tests' (`fulldem/cases/`,
 # `popbal/smoluchowski.py`, rows built by `analysis/verification.py`); each row gives the tolerance the test suite
 # holds that check to. `error` is the relative error the tolerance applies to (measured / reference - 1; for mass
 # accounting the largest imbalance relative to the matte fed); velocities in m/s, `wall` in seconds.
@@ -29,6 +29,7 @@ from analysis.reference import available_references
 from analysis.report import show
 from popbal.smoluchowski import KERNELS
 from settler.paths import DATA_DIR
+
 
 started = time.perf_counter()
 results = []

@@ -1,7 +1,7 @@
 """Numba's on-disk cache, kept in a folder per version of the toolkit's source.
 
 Numba checks a cached kernel against its own file's time stamp only. A kernel that calls or inlines a function of
-*another* file (the DEM kernels call ``fulldem.contacts`` and ``settler.physics``) is therefore not recompiled when
+*another* file (the DEM kernels call ``fulldem.dem.laws`` and ``settler.physics``) is therefore not recompiled when
 only that other file changes: it keeps running the old code. Measured 2026-12-01: the demo's DEM kernels, loaded from
 a cache filled before an edit elsewhere, gave forces differing by 1e-18 N from a fresh compilation of the same
 source; a changed law would have been silently ignored.

@@ -22,8 +22,8 @@ def test_half_volume_radius_is_the_volume_weighted_median():
 
 
 def test_face_interpolation_is_exact_for_a_linear_field():
-    from fulldem.channel import face_value
-    from fulldem.grid import Grid
+    from fulldem.fluid.grid import Grid
+    from fulldem.io.channel import face_value
 
     grid = Grid((6, 5, 8), 0.01, (0.1, 0.0, -0.02))
     shape = grid.face_shape(2)
@@ -40,8 +40,8 @@ def test_face_interpolation_is_exact_for_a_linear_field():
 def test_fulldem_channel_radius_of_a_ring_and_the_profile():
     """Droplets on a ring of radius 12 mm around the inlet axis at mid-height: channel_radius is 12 mm; the slag at
     rest has no velocity on the axis; the profile has one row per band, the ring's volume in the middle ones."""
-    from fulldem import channel
     from fulldem.droplets import DropletStore
+    from fulldem.io import channel
     from fulldem.stepper import Simulation
 
     case = load_case("demo", ["feed.mass_rate=0"])

@@ -1,11 +1,12 @@
-"""The strict reader of initial-droplet lists (fulldem.droplet_list)."""
+"""The strict reader of initial-droplet lists (fulldem.io.droplet_list)."""
 
 import time
 
 import numpy as np
 import pytest
 
-from fulldem.droplet_list import COLUMNS, DropletListError, read_droplet_list
+from fulldem.io.droplet_list import COLUMNS, DropletListError, read_droplet_list
+
 
 LOWER, UPPER = (0.0, 0.0, 0.0), (0.05, 0.04, 0.1)
 SLAG = 3300.0

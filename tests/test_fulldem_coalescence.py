@@ -12,12 +12,14 @@ import numba
 import numpy as np
 import pytest
 
-from fulldem import dem
-from fulldem.coalescence import SIZE_BINS, size_bin
+from fulldem.dem import records
+from fulldem.dem import stepper as dem_stepper
 from fulldem.droplets import COALESCING, MERGED, DropletStore
 from fulldem.stepper import Simulation
+from fulldem.submodels.coalescence import SIZE_BINS, size_bin
 from settler.cases import load_case
 from settler.physics import coalescence_probability
+
 
 BOX = 0.04
 SMALL_BOX = ["feed.mass_rate=0", "fulldem.cell_size=0.005", "fulldem.fluid_step=0.002"]
@@ -31,20 +33,20 @@ def test_first_contact_records_the_approach_speed_once(half):
     d = 0.5e-3
     store.add([[2e-3, 2e-3, 2e-3], [2e-3 + d + 2e-5, 2e-3, 2e-3]], d, 5000.0,
               velocity=[[0.03, 0.0, 0.0], [-0.02, 0.0, 0.0]])
-    stepper = dem.DemStepper(store, (0, 0, 0), (4e-3,) * 3, (False, False, False), 1e-5, 5.0, d, 0.5, 0.1e-3,
+    stepper = dem_stepper.DemStepper(store, (0, 0, 0), (4e-3,) * 3, (False, False, False), 1e-5, 5.0, d, 0.5, 0.1e-3,
                              (0, 0, 0), half_list=half, record_first_contacts=True)
     stepper.droplets_changed()
     stepper.set_drag(np.zeros(store.capacity))
     fluid = np.zeros((1, 3))
     a, b, speed = stepper.take_first_contacts()
     assert a.size == 0
-    stepper.advance(20, fluid, dem.NO_IMPULSE)  # 20 um gap at 0.05 m/s: touching after 40 steps
+    stepper.advance(20, fluid, dem_stepper.NO_IMPULSE)  # 20 um gap at 0.05 m/s: touching after 40 steps
     assert stepper.take_first_contacts()[0].size == 0
-    stepper.advance(30, fluid, dem.NO_IMPULSE)
+    stepper.advance(30, fluid, dem_stepper.NO_IMPULSE)
     a, b, speed = stepper.take_first_contacts()
     assert sorted({int(a[0]), int(b[0])}) == [0, 1] and a.size == (1 if half else 2)
     assert speed == pytest.approx(0.05, rel=1e-12)
-    stepper.advance(10, fluid, dem.NO_IMPULSE)  # still in contact: no new first contact
+    stepper.advance(10, fluid, dem_stepper.NO_IMPULSE)  # still in contact: no new first contact
     assert stepper.take_first_contacts()[0].size == 0
 
 
@@ -202,7 +204,7 @@ def _forces(which, half, marked=False):
     store.add(_triangle()[list(which)], np.array(_SIZES)[list(which)], 5000.0)
     if marked:
         store.mark_pairs([0], [1])
-    stepper = dem.DemStepper(store, (0, 0, 0), (6e-3,) * 3, (False, False, False), 1e-5, 5.0, 0.5e-3, 0.5, 0.2e-3,
+    stepper = dem_stepper.DemStepper(store, (0, 0, 0), (6e-3,) * 3, (False, False, False), 1e-5, 5.0, 0.5e-3, 0.5, 0.2e-3,
                              (0, 0, 0), half_list=half, sort_on_rebuild=False)
     stepper.droplets_changed()
     stepper.compute_forces()
@@ -248,12 +250,12 @@ def _free_flight_run(marked):
     store.add(position, d, 5000.0, velocity=velocity)
     if marked:
         store.mark_pairs([2, 4], [3, 5])
-    stepper = dem.DemStepper(store, (0, 0, 0), (6e-3,) * 3, (False, False, False), 2e-3 / 36, 2.5, d, 0.3, 0.2e-3,
+    stepper = dem_stepper.DemStepper(store, (0, 0, 0), (6e-3,) * 3, (False, False, False), 2e-3 / 36, 2.5, d, 0.3, 0.2e-3,
                              (0, 0, 0), sort_on_rebuild=False)
     stepper.droplets_changed()
     beta = np.full(store.capacity, 3 * math.pi * 0.3 * d)  # Stokes drag in a 0.3 Pa s slag [kg/s]
     stepper.set_drag(beta)
-    stepper.advance(36, np.zeros((1, 3)), dem.NO_IMPULSE)
+    stepper.advance(36, np.zeros((1, 3)), dem_stepper.NO_IMPULSE)
     return stepper
 
 
@@ -263,14 +265,14 @@ def test_free_flight_never_takes_marked_partners():
     pair 0.3 mm apart flies free (nothing is near it), so its exclusion when marked is the marking's doing; the pair
     overlapping by 10 % is sub-stepped either way (unmarked it pushes apart; marked it stays at rest, untouched)."""
     plain = _free_flight_run(marked=False)
-    free = (plain._free_flags[:27] & dem.FREE_FLIGHT) != 0
+    free = (plain._free_flags[:27] & records.FREE_FLIGHT) != 0
     assert plain.free_flight_counts.advances == 1
     assert free[4] and free[5] and not free[2] and not free[3]
     stepper = _free_flight_run(marked=True)
     flags = stepper._free_flags[:27]
     assert stepper.free_flight_counts.advances == 1 and stepper.free_flight_counts.breaches == 0
-    assert not ((flags & dem.FREE_FLIGHT) != 0)[2:6].any()
-    assert ((flags & dem.FREE_FLIGHT) != 0).sum() == free.sum() - 2  # the other droplets as before
+    assert not ((flags & records.FREE_FLIGHT) != 0)[2:6].any()
+    assert ((flags & records.FREE_FLIGHT) != 0).sum() == free.sum() - 2  # the other droplets as before
     s = stepper.store
     np.testing.assert_array_equal(s.velocity[2:6], 0.0)  # no force between partners, nothing else near
     np.testing.assert_allclose(s.position[3] - s.position[2], [0.9 * 0.5e-3, 0.0, 0.0], rtol=0, atol=1e-18)
@@ -308,7 +310,7 @@ def _dense_cluster(mode, steps):
 
 
 def test_delayed_merge_keeps_contacts_within_the_bound_where_the_instantaneous_merge_explodes():
-    """The contact stiffness is a numerical choice (fulldem.contacts): a contact carrying load_factor = 10 buoyant
+    """The contact stiffness is a numerical choice (fulldem.dem.laws): a contact carrying load_factor = 10 buoyant
     weights of its smaller droplet overlaps max_overlap = 1 % of that droplet's diameter, so the spring force of any
     contact is load_factor x (overlap / d_small) / max_overlap buoyant weights of the smaller droplet (exact, for the
     linear law with k ~ d_small^2). Bound: 5 % overlap, 50 weights, five times the load the stiffness was made for

@@ -6,10 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from fulldem import coupling as cp
-from fulldem.grid import Grid
+from fulldem.coupling import filtered, mobility, smoothing
+from fulldem.fluid.grid import Grid
 
-CUT = cp.DEFAULT_CUT
+
+CUT = smoothing.DEFAULT_CUT
 
 
 def _droplets(rng, n, grid, dmin=0.3e-3, dmax=12e-3):
@@ -35,8 +36,8 @@ def test_deposit_conserves_and_is_adjoint_of_interpolate(periodic, component):
     pos, diam = _droplets(rng, 60, grid)
     value = rng.uniform(0.5, 2.0, 60)
     out = _field(grid, component)
-    scratch = np.zeros((cp.thread_count(), *out.shape))
-    cp.deposit(pos, diam, value, 60, component, out, *_args(grid), 1.0, 0.5, CUT, scratch)
+    scratch = np.zeros((smoothing.thread_count(), *out.shape))
+    smoothing.deposit(pos, diam, value, 60, component, out, *_args(grid), 1.0, 0.5, CUT, scratch)
     assert out.sum() == pytest.approx(value.sum(), rel=1e-13)  # nothing lost, nothing created
     if component < 3 and not periodic[component]:
         # wall-normal boundary faces carry imposed velocities: they receive nothing
@@ -44,7 +45,7 @@ def test_deposit_conserves_and_is_adjoint_of_interpolate(periodic, component):
     # adjoint: <deposit(value), field> = <value, interpolate(field)>
     field = rng.normal(size=out.shape)
     interp = np.zeros(60)
-    cp.interpolate(pos, diam, 60, component, field, interp, *_args(grid), 1.0, 0.5, CUT)
+    smoothing.interpolate(pos, diam, 60, component, field, interp, *_args(grid), 1.0, 0.5, CUT)
     assert np.sum(out * field) == pytest.approx(np.sum(value * interp), rel=1e-12)
 
 
@@ -54,14 +55,14 @@ def test_interpolation_reproduces_constant_and_linear_fields():
     pos, diam = _droplets(rng, 40, grid, dmax=4e-3)
     field = np.full(grid.face_shape(0), 2.5)
     out = np.zeros(40)
-    cp.interpolate(pos, diam, 40, 0, field, out, *_args(grid), 1.0, 0.5, CUT)
+    smoothing.interpolate(pos, diam, 40, 0, field, out, *_args(grid), 1.0, 0.5, CUT)
     np.testing.assert_allclose(out, 2.5, rtol=1e-14)
     # a field linear in z on x-faces: the truncated, discretely normalised Gaussian has a first moment that is not
     # exactly zero, so the interpolated position is off by a small fraction of a cell (bounded here by 0.1 h)
     z = grid.cell_centres(2)
     field = np.broadcast_to(3.0 * z, grid.face_shape(0)).copy()
     inner = (pos[:, 2] > 0.02) & (pos[:, 2] < 0.06)
-    cp.interpolate(pos, diam, 40, 0, field, out, *_args(grid), 1.0, 0.5, CUT)
+    smoothing.interpolate(pos, diam, 40, 0, field, out, *_args(grid), 1.0, 0.5, CUT)
     offset = np.abs(out[inner] / 3.0 - pos[inner, 2])
     assert offset.max() < 0.1 * grid.spacing
 
@@ -76,15 +77,15 @@ def test_pressure_gradient_force_telescopes_to_zero():
     volume = np.pi / 6 * diam**3
     p = rng.normal(size=grid.shape)
     grads = grid.zeros_faces()
-    cp.pressure_gradient_faces(p, grid.spacing, np.asarray(grid.periodic), *grads)
+    smoothing.pressure_gradient_faces(p, grid.spacing, np.asarray(grid.periodic), *grads)
     total = np.zeros(3)
     for a in range(3):
         phi = np.zeros(grid.face_shape(a))
-        scratch = np.zeros((cp.thread_count(), *phi.shape))
-        cp.deposit(pos, diam, volume / grid.cell_volume, n, a, phi, *_args(grid), 1.0, 0.5, CUT, scratch)
+        scratch = np.zeros((smoothing.thread_count(), *phi.shape))
+        smoothing.deposit(pos, diam, volume / grid.cell_volume, n, a, phi, *_args(grid), 1.0, 0.5, CUT, scratch)
         eps = 1.0 - phi
         g_at = np.zeros(n)
-        cp.interpolate(pos, diam, n, a, grads[a], g_at, *_args(grid), 1.0, 0.5, CUT)
+        smoothing.interpolate(pos, diam, n, a, grads[a], g_at, *_args(grid), 1.0, 0.5, CUT)
         fluid = np.sum(eps[tuple(slice(0, s) for s in grid.shape)] * grads[a][tuple(slice(0, s) for s in grid.shape)])
         total[a] = fluid * grid.cell_volume + np.sum(volume * g_at)
         scale = np.sum(np.abs(grads[a])) * grid.cell_volume
@@ -97,19 +98,19 @@ def test_self_weight_matches_own_deposit_seen_back():
     pos, diam = _droplets(rng, 5, grid)
     for p in range(5):
         out = grid.zeros_cells()
-        cp.deposit(pos[p:p + 1], diam[p:p + 1], np.ones(1), 1, 3, out, *_args(grid), 1.0, 0.5, CUT,
+        smoothing.deposit(pos[p:p + 1], diam[p:p + 1], np.ones(1), 1, 3, out, *_args(grid), 1.0, 0.5, CUT,
                    np.zeros((1, *out.shape)))
         seen = np.zeros(1)
-        cp.interpolate(pos[p:p + 1], diam[p:p + 1], 1, 3, out, seen, *_args(grid), 1.0, 0.5, CUT)
+        smoothing.interpolate(pos[p:p + 1], diam[p:p + 1], 1, 3, out, seen, *_args(grid), 1.0, 0.5, CUT)
         sw = np.zeros(1)
-        cp.self_weight(pos[p:p + 1], diam[p:p + 1], 1, 3, sw, *_args(grid), 1.0, 0.5, CUT)
+        smoothing.self_weight(pos[p:p + 1], diam[p:p + 1], 1, 3, sw, *_args(grid), 1.0, 0.5, CUT)
         assert sw[0] == pytest.approx(seen[0], rel=1e-12)
 
 
 def test_gaussian_self_mobility_reproduces_stokes_drag():
     # Maxey & Patel (2001): a Gaussian of width a/sqrt(pi) has the self-mobility of a sphere of radius a
     a, mu = 1e-3, 0.45
-    assert cp.gaussian_self_mobility(a / math.sqrt(math.pi), mu) == pytest.approx(1 / (6 * math.pi * mu * a),
+    assert mobility.gaussian_self_mobility(a / math.sqrt(math.pi), mu) == pytest.approx(1 / (6 * math.pi * mu * a),
                                                                                  rel=1e-14)
 
 
@@ -117,18 +118,18 @@ def test_gaussian_self_mobility_reproduces_stokes_drag():
 def test_discrete_mobility_close_to_continuous(ratio):
     """On a resolved kernel (sigma >= h) the grid's second-order operators reproduce the continuous Gaussian
     self-mobility to within the O(h^2/sigma^2) truncation error; at sigma = 2h within 5 %."""
-    factor = cp.discrete_mobility_factor(ratio)
+    factor = mobility.discrete_mobility_factor(ratio)
     assert abs(factor - 1.0) < (0.10 if ratio == 1.0 else 0.05)
 
 
 def test_oseen_factor_limits():
     # Re -> 0: Stokes; small Re: the Oseen correction is linear in Re; large Re: the disturbance is swept away
-    assert cp.oseen_factor(0.0) == pytest.approx(1.0, abs=1e-3)
-    f = cp.oseen_factor(np.array([0.01, 0.02]))
+    assert mobility.oseen_factor(0.0) == pytest.approx(1.0, abs=1e-3)
+    f = mobility.oseen_factor(np.array([0.01, 0.02]))
     assert (1 - f[1]) / (1 - f[0]) == pytest.approx(2.0, rel=0.05)
-    big = cp.oseen_factor(np.array([1e3, 2e3]))
+    big = mobility.oseen_factor(np.array([1e3, 2e3]))
     assert big[0] / big[1] == pytest.approx(2.0, rel=0.05)
-    assert np.all(np.diff(cp.oseen_factor(np.logspace(-2, 3, 20))) < 0)
+    assert np.all(np.diff(mobility.oseen_factor(np.logspace(-2, 3, 20))) < 0)
 
 
 @pytest.mark.parametrize("periodic", [(False, False, False), (True, False, True)])
@@ -144,37 +145,37 @@ def test_fused_passes_match_single_quantity_kernels(periodic):
     values = rng.uniform(-1.0, 2.0, size=(len(components), n))
     outs = [_field(grid, c) for c in components]
     nx, ny, nz = grid.shape
-    scratch = np.zeros((cp.thread_count(), len(components), nx + 1, ny + 1, nz + 1))
+    scratch = np.zeros((smoothing.thread_count(), len(components), nx + 1, ny + 1, nz + 1))
     # the first pass stores the stencils (one droplet too wide for the table: recomputed), the second loads them
     diam[7] = 0.05
-    table = cp.stencil_table(n)
-    cp.deposit_many(pos, diam, values, n, components, tuple(outs), *_args(grid), 1.0, 0.5, CUT, scratch, *table,
-                    cp.STORE)
+    table = smoothing.stencil_table(n)
+    smoothing.deposit_many(pos, diam, values, n, components, tuple(outs), *_args(grid), 1.0, 0.5, CUT, scratch, *table,
+                    smoothing.STORE)
     assert table[1][7, 0, 0] == 0 and (table[1][:, 0, 0] > 0).sum() > n // 2
     fields = [rng.normal(size=o.shape) for o in outs]
     seen = np.zeros((len(components), n))
     own = np.zeros(n)
-    cp.interpolate_many(pos, diam, n, components, tuple(fields), seen, own, *_args(grid), 1.0, 0.5, CUT, *table,
-                        cp.LOAD)
+    smoothing.interpolate_many(pos, diam, n, components, tuple(fields), seen, own, *_args(grid), 1.0, 0.5, CUT, *table,
+                        smoothing.LOAD)
     for k, c in enumerate(components):
         single = _field(grid, c)
-        cp.deposit(pos, diam, values[k], n, c, single, *_args(grid), 1.0, 0.5, CUT,
-                   np.zeros((cp.thread_count(), *single.shape)))
+        smoothing.deposit(pos, diam, values[k], n, c, single, *_args(grid), 1.0, 0.5, CUT,
+                   np.zeros((smoothing.thread_count(), *single.shape)))
         np.testing.assert_array_equal(outs[k], single)
         interp = np.zeros(n)
-        cp.interpolate(pos, diam, n, c, fields[k], interp, *_args(grid), 1.0, 0.5, CUT)
+        smoothing.interpolate(pos, diam, n, c, fields[k], interp, *_args(grid), 1.0, 0.5, CUT)
         np.testing.assert_array_equal(seen[k], interp)
     sw = np.zeros(n)
-    cp.self_weight(pos, diam, n, 3, sw, *_args(grid), 1.0, 0.5, CUT)
+    smoothing.self_weight(pos, diam, n, 3, sw, *_args(grid), 1.0, 0.5, CUT)
     np.testing.assert_array_equal(own, sw)
 
 
 def test_weights_match_direct_gaussian():
     """The recurrence that evaluates the Gaussian at consecutive nodes agrees with one exp per node to round-off."""
-    idx = np.zeros(cp.MAX_STENCIL, dtype=np.int64)
-    wts = np.zeros(cp.MAX_STENCIL)
+    idx = np.zeros(smoothing.MAX_STENCIL, dtype=np.int64)
+    wts = np.zeros(smoothing.MAX_STENCIL)
     for sigma, x in [(0.004, 0.0513), (0.011, 0.0377), (0.0021, 0.0099), (0.05, 0.1)]:
-        count = cp.weights_1d(x, 0.0, 0.004, 40, True, True, False, sigma, CUT, idx, wts)
+        count = smoothing.weights_1d(x, 0.0, 0.004, 40, True, True, False, sigma, CUT, idx, wts)
         r = idx[:count] - x / 0.004
         direct = np.exp(-r**2 / (2 * (sigma / 0.004) ** 2))
         np.testing.assert_allclose(wts[:count], direct / direct.sum(), rtol=1e-13)
@@ -183,10 +184,10 @@ def test_weights_match_direct_gaussian():
 
 # ------------------------------------------------------------------------------------------ filtered kernel
 def _filtered_deposit(kernel, grid, pos, values, component):
-    """The stepper's two-step deposit: :func:`cp.cic_deposit_many`, then the filter."""
+    """The stepper's two-step deposit: :func:`smoothing.cic_deposit_many`, then the filter."""
     n = len(pos)
     raw = _field(grid, component)
-    cp.cic_deposit_many(pos, values.reshape(1, -1), n, np.array([component]), (raw,), *_args(grid),
+    smoothing.cic_deposit_many(pos, values.reshape(1, -1), n, np.array([component]), (raw,), *_args(grid),
                         np.zeros((2, 1, *[s + 1 for s in grid.shape])))
     return kernel.filter(raw, component)
 
@@ -194,7 +195,7 @@ def _filtered_deposit(kernel, grid, pos, values, component):
 def _filtered_interpolate(kernel, grid, pos, field, component):
     n = len(pos)
     out = np.zeros((1, n))
-    cp.cic_interpolate_many(pos, n, np.array([component]), (kernel.filter(field, component),), out, *_args(grid))
+    smoothing.cic_interpolate_many(pos, n, np.array([component]), (kernel.filter(field, component),), out, *_args(grid))
     return out[0]
 
 
@@ -235,12 +236,12 @@ def test_trilinear_kernels_match_a_direct_twin(periodic):
                         twin[k][i, j, m] += values[k, p] * wi * wj * wm
                         seen[k, p] += wi * wj * wm * fields[k][i, j, m]
     kernel = tuple(_field(grid, c) for c in components)
-    cp.cic_deposit_many(pos, values, n, components, kernel, *_args(grid),
+    smoothing.cic_deposit_many(pos, values, n, components, kernel, *_args(grid),
                         np.zeros((2, 5, *[s + 1 for s in grid.shape])))
     for a, b in zip(twin, kernel):
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-13 * np.abs(a).max())
     out = np.zeros((5, n))
-    cp.cic_interpolate_many(pos, n, components, fields, out, *_args(grid))
+    smoothing.cic_interpolate_many(pos, n, components, fields, out, *_args(grid))
     np.testing.assert_allclose(out, seen, rtol=0, atol=1e-13)
 
 
@@ -251,7 +252,7 @@ def test_filtered_kernel_conserves_and_is_adjoint(periodic, component):
     wall-normal boundary faces receive nothing, and <D v, f> = <v, I f> (I = D^T), to round-off, with droplets
     anywhere in the box including the half cells next to the walls."""
     grid = Grid((12, 10, 14), 0.004, (0.1, -0.02, 0.0), periodic)
-    kernel = cp.FilteredKernel(grid.shape, periodic, 1.0)
+    kernel = filtered.FilteredKernel(grid.shape, periodic, 1.0)
     rng = np.random.default_rng(10 + component)
     lo, hi = np.asarray(grid.lower), grid.upper
     pos = lo + rng.uniform(0.0, 1.0, size=(80, 3)) * (hi - lo)
@@ -273,7 +274,7 @@ def test_filtered_kernel_width_matches_the_direct_gaussian():
     sigma^2 = (sigma_cells h)^2 (0.1 %): the linear hat's h^2/6 plus the filter's sigma_g^2;
     and the self weight sum W^2 agrees with the deposit seen back at the droplet."""
     grid = Grid((16, 16, 16), 1.0, (0.0, 0.0, 0.0), (False, False, False))
-    kernel = cp.FilteredKernel(grid.shape, grid.periodic, 1.0)
+    kernel = filtered.FilteredKernel(grid.shape, grid.periodic, 1.0)
     variances = []
     offsets = (np.arange(20) + 0.5) / 20  # evenly over the cell (the hat's variance f (1 - f) h^2 averages to h^2/6)
     for p in np.column_stack([7.5 + offsets, 7.5 + offsets[::-1], 7.5 + np.roll(offsets, 7)]):
@@ -289,5 +290,5 @@ def test_filtered_kernel_width_matches_the_direct_gaussian():
 def test_filtered_kernel_self_mobility_factor():
     """The filtered kernel's self-mobility on the MAC grid (periodic FFT Stokes solve, images removed) is within
     10 % of the continuous Gaussian's 1/(6 pi^1.5 mu sigma), like the direct kernel's; the correction uses it."""
-    assert cp.filtered_mobility_factor(1.0) == pytest.approx(1.0, abs=0.1)
-    assert cp.filtered_mobility_factor(1.0) == pytest.approx(cp.discrete_mobility_factor(1.0), rel=0.05)
+    assert filtered.filtered_mobility_factor(1.0) == pytest.approx(1.0, abs=0.1)
+    assert filtered.filtered_mobility_factor(1.0) == pytest.approx(mobility.discrete_mobility_factor(1.0), rel=0.05)

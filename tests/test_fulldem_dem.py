@@ -11,9 +11,16 @@ import math
 import numpy as np
 import pytest
 
-from fulldem import contacts, dem, reference
-from fulldem import neighbours as nb
+from fulldem import tuning
+from fulldem.dem import integrators
+from fulldem.dem import laws as contacts
+from fulldem.dem import neighbours as nb
+from fulldem.dem import pairs, records
+from fulldem.dem import stepper as dem_stepper
+from fulldem.dem import twins as reference
+from fulldem.dem import walls as dem_walls
 from fulldem.droplets import COALESCING, DropletStore
+
 
 RHO = 5100.0
 DRHO = 5100.0 - 3150.0
@@ -136,7 +143,7 @@ def test_spatial_order_keeps_partners_close_in_a_flat_layer():
     nl.build(pos[order], d[order], n)
     # slabs of cells across the thin axis hold n/6 droplets each; across a wide axis about n/60
     assert nl.longest_jump < n // 20
-    assert dem.slab_count(n, nl.longest_jump) >= 8
+    assert pairs.slab_count(n, nl.longest_jump) >= 8
 
 
 @pytest.mark.parametrize("half", [True, False])
@@ -210,20 +217,20 @@ def test_reorder_store_keeps_droplets_and_partners():
 
 
 # ------------------------------------------------------------------------------------------------ kernels vs twins
-NO_WALLS = dem.walls_record(np.zeros(3), np.ones(3), (True, True, True), False, None, 0.0)
+NO_WALLS = records.walls_record(np.zeros(3), np.ones(3), (True, True, True), False, None, 0.0)
 
 
 def _bodies(store, mass):
-    return dem.Bodies(store.diameter, mass, store.flags, store.partner)
+    return records.Bodies(store.diameter, mass, store.flags, store.partner)
 
 
 def _full_list_forces(store, mass, nl, k_ref, d_ref, zeta, force, walls=NO_WALLS, nchunk=4):
     n = store.count
     candidates = np.zeros((nchunk, max(nl.longest_row, 1)), dtype=np.int32)
     damping = np.full(nl.index.shape[0], np.nan)
-    dem.pair_damping(nl.start, nl.index, store.diameter, mass, n, k_ref, d_ref, zeta, damping)
-    return dem.contact_forces_full(store.position, store.velocity, _bodies(store, mass), n,
-                                   dem.contacts_record(nl, damping, k_ref, d_ref, 0), walls, nchunk, candidates, force)
+    pairs.pair_damping(nl.start, nl.index, store.diameter, mass, n, k_ref, d_ref, zeta, damping)
+    return pairs.contact_forces_full(store.position, store.velocity, _bodies(store, mass), n,
+                                   records.contacts_record(nl, damping, k_ref, d_ref, 0), walls, nchunk, candidates, force)
 
 
 def _cluster(rng, n=50, periodic=(False, False, False)):
@@ -260,10 +267,10 @@ def test_contact_kernels_match_numpy_twin(periodic, half):
     law = contacts.contact_law_code("hooke")
     if half:
         damping = np.full(nl.index.shape[0], np.nan)
-        dem.pair_damping(nl.start, nl.index, store.diameter, mass, n, 3.0, 0.5e-3, zeta, damping)
-        nslab = dem.slab_count(n, nl.longest_jump)
-        worst = dem.contact_forces_half(store.position, store.velocity, _bodies(store, mass), n,
-                                        dem.contacts_record(nl, damping, 3.0, 0.5e-3, law), NO_WALLS, nslab,
+        pairs.pair_damping(nl.start, nl.index, store.diameter, mass, n, 3.0, 0.5e-3, zeta, damping)
+        nslab = pairs.slab_count(n, nl.longest_jump)
+        worst = pairs.contact_forces_half(store.position, store.velocity, _bodies(store, mass), n,
+                                        records.contacts_record(nl, damping, 3.0, 0.5e-3, law), NO_WALLS, nslab,
                                         np.zeros((nslab, nl.longest_row), dtype=np.int32), force)
     else:
         worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, zeta, force)
@@ -293,16 +300,16 @@ def test_half_list_slabs_agree_with_one_slab_and_with_the_full_list():
     half.build(store.position, store.diameter, n)
     mass = np.asarray(store.mass(), dtype=float)
     damping = np.zeros(half.index.shape[0])
-    dem.pair_damping(half.start, half.index, store.diameter, mass, n, 3.0, 0.5e-3, 0.2, damping)
-    safe = [s for s in range(2, dem.MAX_SLABS + 1, 2) if n // s >= 2 * half.longest_jump + 1]
-    assert len(safe) >= 2 and dem.slab_count(n, half.longest_jump) == max(safe)
-    assert dem.slab_count(n, n // 3) == 1
+    pairs.pair_damping(half.start, half.index, store.diameter, mass, n, 3.0, 0.5e-3, 0.2, damping)
+    safe = [s for s in range(2, pairs.MAX_SLABS + 1, 2) if n // s >= 2 * half.longest_jump + 1]
+    assert len(safe) >= 2 and pairs.slab_count(n, half.longest_jump) == max(safe)
+    assert pairs.slab_count(n, n // 3) == 1
     results = []
     for nslab in [1, *safe]:
         force = np.full((n, 3), np.nan)
         candidates = np.zeros((nslab, half.longest_row), dtype=np.int32)
-        worst = dem.contact_forces_half(store.position, store.velocity, _bodies(store, mass), n,
-                                        dem.contacts_record(half, damping, 3.0, 0.5e-3, 0), NO_WALLS, nslab,
+        worst = pairs.contact_forces_half(store.position, store.velocity, _bodies(store, mass), n,
+                                        records.contacts_record(half, damping, 3.0, 0.5e-3, 0), NO_WALLS, nslab,
                                         candidates, force)
         results.append((force, worst))
     full = nb.NeighbourList((0, 0, 0), box, (False, False, False), 0.1e-3, half=False)
@@ -350,7 +357,7 @@ def test_wall_kernel_matches_numpy_twin(absorbing_bottom):
     outlet = (1, 2.5e-3, 1.5e-3, 1.2e-3)
     force = rng.normal(0, 1e-6, (n, 3))
     before = force.copy()
-    worst = dem.wall_forces(pos, vel, d, mass, n, dem.walls_record(box_lower, box_upper, periodic, absorbing_bottom,
+    worst = dem_walls.wall_forces(pos, vel, d, mass, n, records.walls_record(box_lower, box_upper, periodic, absorbing_bottom,
                                                                    outlet, 0.3), 2.0, 0.5e-3, 0, 4, force)
     ref, ref_worst = reference.wall_forces_reference(pos, vel, d, mass, n, box_lower, box_upper, periodic,
                                                absorbing_bottom, *outlet, 2.0, 0.5e-3, 0.3, 0)
@@ -376,13 +383,13 @@ def test_full_list_kernel_applies_the_same_walls():
     nl.build(store.position, store.diameter, n)
     geometry = (np.zeros(3), box, periodic, False, 0, 0.6e-3, 0.7e-3, 0.5e-3)
     fused = np.zeros((n, 3))
-    planes = dem.wall_planes(np.zeros(3), box, periodic, False)
-    walls = dem.walls_record(*geometry[:4], geometry[4:], 0.35)
+    planes = records.wall_planes(np.zeros(3), box, periodic, False)
+    walls = records.walls_record(*geometry[:4], geometry[4:], 0.35)
     assert np.array_equal(walls.lower, planes[0]) and np.array_equal(walls.upper, planes[1])
     worst = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, fused, walls=walls)
     apart = np.zeros((n, 3))
     worst_pairs = _full_list_forces(store, mass, nl, 3.0, 0.5e-3, 0.25, apart)
-    worst_walls = dem.wall_forces(store.position, store.velocity, store.diameter, mass, n, walls, 3.0, 0.5e-3, 0, 2,
+    worst_walls = dem_walls.wall_forces(store.position, store.velocity, store.diameter, mass, n, walls, 3.0, 0.5e-3, 0, 2,
                                   apart)
     np.testing.assert_allclose(fused, apart, rtol=1e-13, atol=1e-14 * np.abs(apart).max())
     assert worst == max(worst_pairs, worst_walls) and worst_walls > 0.0
@@ -406,12 +413,12 @@ def test_integrator_kernels_match_numpy_twin(uniform_fluid):
         return -2.0 * x - 1e-3 * v
 
     drag = np.zeros((n, 3))
-    dem.drag_factors_into(mass, beta, h, n, drag)
+    integrators.drag_factors_into(mass, beta, h, n, drag)
     x, v, impulse = pos.copy(), vel.copy(), np.zeros((n, 3))
-    motion = dem.Motion(drag, fluid, body, h, impulse)
-    moved = dem.integrate_initial(x, v, force_old, mass, motion, n, 3)
+    motion = records.Motion(drag, fluid, body, h, impulse)
+    moved = integrators.integrate_initial(x, v, force_old, mass, motion, n, 3)
     force_new = force_new_of(x, v)
-    dem.integrate_final(v, force_new, mass, motion, n)
+    integrators.integrate_final(v, force_new, mass, motion, n)
     x_ref, v_ref, j_ref = reference.integrate_reference(pos, vel, force_old, force_new_of, mass, beta, fluid, body, h, n)
     np.testing.assert_allclose(x, x_ref, rtol=1e-13, atol=1e-18)
     np.testing.assert_allclose(v, v_ref, rtol=1e-12, atol=1e-18)
@@ -425,7 +432,7 @@ def test_advance_equals_repeated_steps_with_resorting(half_list):
     for fused in (False, True):
         store, _, _ = _cluster(np.random.default_rng(12), n=50)
         store.velocity[:50] *= 300.0  # fast enough to trigger rebuilds (and re-sorting) within the run
-        stepper = dem.DemStepper(store, (0, 0, 0), (0.004, 0.004, 0.004), (True, False, True), 2e-5, 5.0, 0.5e-3,
+        stepper = dem_stepper.DemStepper(store, (0, 0, 0), (0.004, 0.004, 0.004), (True, False, True), 2e-5, 5.0, 0.5e-3,
                                  0.5, 0.05e-3, (0, 0, -3.75), half_list=half_list)
         stepper.droplets_changed()
         beta = 3 * math.pi * MU * store.diameter[:50]
@@ -453,7 +460,7 @@ def test_advance_equals_repeated_steps_with_resorting(half_list):
 def test_results_do_not_depend_on_the_thread_count():
     rng = np.random.default_rng(5)
     n = 2500  # above PARALLEL_MIN_DROPLETS
-    assert n >= dem.PARALLEL_MIN_DROPLETS
+    assert n >= tuning.PARALLEL_MIN_DROPLETS
     box = np.array([0.006, 0.006, 0.03])
     pos = rng.uniform(0, 1, (n, 3)) * box
     d = rng.uniform(0.35e-3, 0.65e-3, n)
@@ -462,11 +469,11 @@ def test_results_do_not_depend_on_the_thread_count():
     for threads in (1, 2, None):
         store = DropletStore(n)
         store.add(pos, d, RHO, velocity=vel)
-        stepper = dem.DemStepper(store, (0, 0, 0), box, (True, True, False), 2e-5, 5.0, 0.5e-3, 0.5, 0.1e-3,
+        stepper = dem_stepper.DemStepper(store, (0, 0, 0), box, (True, True, False), 2e-5, 5.0, 0.5e-3, 0.5, 0.1e-3,
                                  (0, 0, -3.75), threads=threads)
         stepper.droplets_changed()
         stepper.set_drag(3 * math.pi * MU * store.diameter)
-        stepper.advance(4 * dem.THREAD_PROBE_STEPS + 7, np.zeros((1, 3)), dem.NO_IMPULSE)
+        stepper.advance(4 * tuning.THREAD_PROBE_STEPS + 7, np.zeros((1, 3)), dem_stepper.NO_IMPULSE)
         order = np.argsort(store.ident[:n])
         states.append((store.position[:n][order], store.velocity[:n][order], stepper.neighbours.builds))
     # fixed thread counts agree bit for bit; the timed choice splits the advance into segments, which moves the
@@ -482,7 +489,7 @@ def test_drag_factors_series_and_exponential_branches_agree():
     decimal.getcontext().prec = 40  # the reference in 40-digit decimal arithmetic
     h = 1.0
     for z in (0.0, 1e-12, 1e-6, 0.1, 0.4999999, 0.5, 0.5000001, 3.0, 40.0):
-        e, phi1, phi2 = dem.drag_factors(z, h)
+        e, phi1, phi2 = integrators.drag_factors(z, h)
         if z == 0.0:
             assert (e, phi1, phi2) == (1.0, 1.0, 0.5)
             continue
@@ -495,7 +502,7 @@ def test_drag_factors_series_and_exponential_branches_agree():
 
 # ------------------------------------------------------------------------------------------------ verification
 def _stepper(store, h, k, restitution, periodic=(True, True, True), box=0.01, body=(0.0, 0.0, 0.0), **kw):
-    stepper = dem.DemStepper(store, (0.0, 0.0, 0.0), (box,) * 3, periodic, h, k, 0.5e-3, restitution, 0.1e-3,
+    stepper = dem_stepper.DemStepper(store, (0.0, 0.0, 0.0), (box,) * 3, periodic, h, k, 0.5e-3, restitution, 0.1e-3,
                              body, **kw)
     stepper.droplets_changed()
     return stepper
@@ -518,7 +525,7 @@ def test_head_on_collision_restitution_and_peak_overlap_in_vacuum(d_pair, e):
     still = np.zeros((1, 3))
     p0 = _mass(d1) * store.velocity[0] + _mass(d2) * store.velocity[1]
     for _ in range(200):
-        stepper.step(still, dem.NO_IMPULSE)
+        stepper.step(still, dem_stepper.NO_IMPULSE)
         gap = store.position[1, 0] - store.position[0, 0] - 0.5 * (d1 + d2)
         peak = max(peak, -gap)
     approach = 2 * speed
@@ -575,7 +582,7 @@ def test_closed_set_conserves_momentum_to_round_off():
     scale = (mass * np.abs(store.velocity[: store.count])).sum()
     still = np.zeros((1, 3))
     for _ in range(300):
-        stepper.step(still, dem.NO_IMPULSE)
+        stepper.step(still, dem_stepper.NO_IMPULSE)
         f = stepper.force[: store.count]
         assert np.abs(f.sum(axis=0)).max() <= 1e-13 * np.abs(f).sum()
     p1 = (mass * store.velocity[: store.count]).sum(axis=0)
@@ -587,7 +594,7 @@ def test_drag_impulse_bookkeeping_with_contacts_and_walls():
     rng = np.random.default_rng(9)
     store, box, _ = _cluster(rng, n=50)
     store.position[: store.count] += 0.2e-3
-    stepper = dem.DemStepper(store, (0, 0, 0), box, (False, True, False), 2e-5, 5.0, 0.5e-3, 0.5, 0.1e-3,
+    stepper = dem_stepper.DemStepper(store, (0, 0, 0), box, (False, True, False), 2e-5, 5.0, 0.5e-3, 0.5, 0.1e-3,
                              (0, 0, -3.75), sort_on_rebuild=False)
     stepper.droplets_changed()
     n = store.count
@@ -645,13 +652,13 @@ def test_dense_settling_pile_overlap_stays_below_two_percent():
     for label, speed_up, duration in (("approach", 100.0, 0.12), ("real", 1.0, 0.02)):
         k = k_ref * speed_up
         h = contacts.stable_step(k, contacts.effective_mass(_mass(d_small), _mass(d_small)))
-        stepper = dem.DemStepper(store, (0, 0, 0), (side, side, 0.05), (True, True, False), h, k, d_small, 0.5,
+        stepper = dem_stepper.DemStepper(store, (0, 0, 0), (side, side, 0.05), (True, True, False), h, k, d_small, 0.5,
                                  0.25 * 0.5e-3, (0, 0, -G * speed_up * DRHO / RHO))
         stepper.droplets_changed()
         stepper.set_drag(3 * math.pi * MU * store.diameter)
         worst[label] = 0.0
         for _ in range(int(duration / h)):
-            stepper.step(still, dem.NO_IMPULSE)
+            stepper.step(still, dem_stepper.NO_IMPULSE)
             worst[label] = max(worst[label], stepper.max_overlap_ratio)
     assert store.position[:n, 2].max() < 0.5 * (6e-3 + 0.65e-3)  # it settled into a pile ...
     assert np.abs(store.velocity[:n]).max() < 3e-4  # ... whose droplets move at under half the settling speed

@@ -1,4 +1,4 @@
-"""The slag solver of fulldem (fulldem/fluid.py, fulldem/pressure.py).
+"""The slag solver of fulldem (fulldem/fluid/, fulldem/fluid/pressure.py).
 
 Tiers: (c) every kernel against its NumPy twin; (b) invariants: discrete mixture continuity after the projection,
 exact momentum balance in a periodic box with the droplets' pressure share, volume balance of inlet and outlet, a
@@ -11,8 +11,13 @@ import math
 import numpy as np
 import pytest
 
-from fulldem import fluid, pressure
-from fulldem.grid import Grid
+from fulldem import boundaries
+from fulldem.fluid import advection, pressure
+from fulldem.fluid import solver as fluid_solver
+from fulldem.fluid import twins as fluid_twins
+from fulldem.fluid import walls as fluid_walls
+from fulldem.fluid.grid import Grid
+
 
 DENSITY = 3150.0
 VISCOSITY = 0.45
@@ -38,24 +43,24 @@ def smooth_faces(grid, rng, low, high):
 
 def padded_random(grid, axis, rng):
     shape = grid.face_shape(axis)
-    padded = np.zeros(tuple(n + 2 * fluid.PAD for n in shape))
-    padded[tuple(slice(fluid.PAD, fluid.PAD + n) for n in shape)] = rng.standard_normal(shape)
-    fluid.fill_ghosts_kernel(padded, axis, *grid.shape, *grid.periodic)
+    padded = np.zeros(tuple(n + 2 * advection.PAD for n in shape))
+    padded[tuple(slice(advection.PAD, advection.PAD + n) for n in shape)] = rng.standard_normal(shape)
+    advection.fill_ghosts_kernel(padded, axis, *grid.shape, *grid.periodic)
     return padded
 
 
 # ----------------------------------------------------------------------------------------- kernels vs twins
 
 
-@pytest.mark.parametrize("scheme", sorted(fluid.ADVECTION_SCHEMES))
+@pytest.mark.parametrize("scheme", sorted(advection.ADVECTION_SCHEMES))
 def test_face_value_matches_twin(scheme):
-    code = fluid.ADVECTION_SCHEMES[scheme].code
+    code = advection.ADVECTION_SCHEMES[scheme].code
     rng = np.random.default_rng(0)
     values = rng.standard_normal((3, 200))
     values[:, :20] = np.array([0.0, 1.0, 2.0])[:, None]  # smooth (r = 1) and a flat stretch
     values[:, 20:30] = 0.5
-    twin = fluid.face_value_reference(*values, code)
-    compiled = np.array([fluid.face_value(*values[:, n], code) for n in range(values.shape[1])])
+    twin = fluid_twins.face_value_reference(*values, code)
+    compiled = np.array([advection.face_value(*values[:, n], code) for n in range(values.shape[1])])
     np.testing.assert_allclose(compiled, twin, rtol=1e-14, atol=1e-15)
     if scheme in ("koren", "van_leer", "quick", "central"):
         assert np.allclose(twin[:20], 1.5)  # second order or better: exact on a linear profile
@@ -67,25 +72,25 @@ def test_fill_ghosts_matches_twin(periodic):
     rng = np.random.default_rng(1)
     for axis in range(3):
         shape = grid.face_shape(axis)
-        padded = np.zeros(tuple(n + 2 * fluid.PAD for n in shape))
-        padded[tuple(slice(fluid.PAD, fluid.PAD + n) for n in shape)] = rng.standard_normal(shape)
-        twin = fluid.fill_ghosts_reference(padded, axis, grid.shape, periodic)
-        fluid.fill_ghosts_kernel(padded, axis, *grid.shape, *periodic)
+        padded = np.zeros(tuple(n + 2 * advection.PAD for n in shape))
+        padded[tuple(slice(advection.PAD, advection.PAD + n) for n in shape)] = rng.standard_normal(shape)
+        twin = fluid_twins.fill_ghosts_reference(padded, axis, grid.shape, periodic)
+        advection.fill_ghosts_kernel(padded, axis, *grid.shape, *periodic)
         np.testing.assert_array_equal(padded, twin)
 
 
 @pytest.mark.parametrize("periodic", PERIODICITIES)
-@pytest.mark.parametrize("scheme", sorted(fluid.ADVECTION_SCHEMES))
+@pytest.mark.parametrize("scheme", sorted(advection.ADVECTION_SCHEMES))
 def test_momentum_rhs_matches_twin(periodic, scheme):
-    code = fluid.ADVECTION_SCHEMES[scheme].code
+    code = advection.ADVECTION_SCHEMES[scheme].code
     grid = Grid((5, 4, 6), 0.01, periodic=periodic)
     rng = np.random.default_rng(2)
     velocity = [padded_random(grid, a, rng) for a in range(3)]
     fluxes = [padded_random(grid, a, rng) for a in range(3)]
     for c in range(3):
-        twin = fluid.momentum_rhs_reference(c, velocity[c], fluxes, grid.shape, grid.spacing, 0.3, periodic, code)
+        twin = fluid_twins.momentum_rhs_reference(c, velocity[c], fluxes, grid.shape, grid.spacing, 0.3, periodic, code)
         out = np.zeros(grid.face_shape(c))
-        fluid.momentum_rhs_kernel(c, velocity[c], *fluxes, *grid.shape, grid.spacing, 0.3, *periodic, code, out)
+        advection.momentum_rhs_kernel(c, velocity[c], *fluxes, *grid.shape, grid.spacing, 0.3, *periodic, code, out)
         np.testing.assert_allclose(out, twin, rtol=1e-12, atol=1e-12 * np.abs(twin).max())
 
 
@@ -101,19 +106,19 @@ def test_pressure_kernels_match_twins(periodic):
     phi = rng.standard_normal(grid.shape)
     out = np.empty(grid.shape)
     pressure.mixture_divergence_kernel(*u, *eps, *q, source, grid.spacing, out)
-    np.testing.assert_allclose(out, pressure.mixture_divergence_reference(*u, *eps, *q, source, grid.spacing),
+    np.testing.assert_allclose(out, fluid_twins.mixture_divergence_reference(*u, *eps, *q, source, grid.spacing),
                                rtol=1e-13, atol=1e-11)
     pressure.apply_operator_kernel(phi, *eps, grid.spacing, *periodic, out)
-    np.testing.assert_allclose(out, pressure.apply_operator_reference(phi, *eps, grid.spacing, *periodic),
+    np.testing.assert_allclose(out, fluid_twins.apply_operator_reference(phi, *eps, grid.spacing, *periodic),
                                rtol=1e-13, atol=1e-9)
     velocity = [pressure._periodic_consistent(a, n) if periodic[n] else a for n, a in enumerate(u)]
-    twin = pressure.subtract_gradient_reference(*velocity, phi, 0.7, grid.spacing, *periodic)
+    twin = fluid_twins.subtract_gradient_reference(*velocity, phi, 0.7, grid.spacing, *periodic)
     pressure.subtract_gradient_kernel(*velocity, phi, 0.7, grid.spacing, *periodic)
     for compiled, expected in zip(velocity, twin):
         np.testing.assert_allclose(compiled, expected, rtol=1e-13, atol=1e-12)
     a, b, c, d = (rng.standard_normal(50) for _ in range(4))
     assert pressure.dot_kernel(a, b) == pytest.approx(float(a @ b), rel=1e-13)
-    phi_t, r_t, norm_t = pressure.cg_update_reference(a, b, c, d, 0.3)
+    phi_t, r_t, norm_t = fluid_twins.cg_update_reference(a, b, c, d, 0.3)
     norm = pressure.cg_update_kernel(a, b, c, d, 0.3)
     np.testing.assert_allclose(a, phi_t, rtol=1e-14)
     np.testing.assert_allclose(b, r_t, rtol=1e-14)
@@ -122,7 +127,7 @@ def test_pressure_kernels_match_twins(periodic):
     pressure.cg_direction_kernel(direction, d, 0.4)
     np.testing.assert_allclose(direction, d + 0.4 * c, rtol=1e-14)
     u3 = faces()
-    assert fluid.max_cell_speed_kernel(*u3) == pytest.approx(fluid.max_cell_speed_reference(*u3), rel=1e-14)
+    assert advection.max_cell_speed_kernel(*u3) == pytest.approx(fluid_twins.max_cell_speed_reference(*u3), rel=1e-14)
 
 
 def test_fast_poisson_inverse_is_exact():
@@ -145,7 +150,7 @@ def test_disk_coverage_is_exact():
     h = 0.005
     counts = (40, 40)
     centre, radius = (0.1013, 0.0987), 0.0371
-    coverage = fluid.disk_coverage((0.0, 0.0), h, counts, centre, radius)
+    coverage = fluid_walls.disk_coverage((0.0, 0.0), h, counts, centre, radius)
     assert coverage.sum() * h * h == pytest.approx(np.pi * radius**2, rel=1e-13)
     samples = 200
     offsets = (np.arange(samples) + 0.5) / samples * h
@@ -159,16 +164,16 @@ def test_disk_coverage_is_exact():
 def test_make_boundary_checks_its_input():
     grid = Grid.for_box((0.1, 0.1, 0.1), 0.01)
     with pytest.raises(ValueError, match="inlet"):
-        fluid.make_boundary(grid, inlet=fluid.InletDisk((0.01, 0.05), 0.02))
+        fluid_walls.make_boundary(grid, inlet=boundaries.InletDisk((0.01, 0.05), 0.02))
     with pytest.raises(ValueError, match="side"):
-        fluid.make_boundary(grid, outlet=fluid.OutletDisk("z+", (0.05, 0.05), 0.01))
+        fluid_walls.make_boundary(grid, outlet=boundaries.OutletDisk("z+", (0.05, 0.05), 0.01))
     with pytest.raises(ValueError, match="inflow_flux"):
-        fluid.make_boundary(grid, inflow_flux=1e-6)
+        fluid_walls.make_boundary(grid, inflow_flux=1e-6)
     periodic = Grid.for_box((0.1, 0.1, 0.1), 0.01, periodic=(True, True, True))
     with pytest.raises(ValueError, match="walled z axis"):
-        fluid.make_boundary(periodic, inlet=((0.05, 0.05), 0.02))
+        fluid_walls.make_boundary(periodic, inlet=((0.05, 0.05), 0.02))
     with pytest.raises(ValueError, match="advection"):
-        fluid.step(grid, fluid.rest_state(grid), fluid.make_boundary(grid), DENSITY, VISCOSITY, 1e-3,
+        fluid_solver.step(grid, fluid_solver.rest_state(grid), fluid_walls.make_boundary(grid), DENSITY, VISCOSITY, 1e-3,
                    advection="weno")
 
 
@@ -181,17 +186,17 @@ def mixture_case(grid, rng):
     flux = [1e-3 * (f - 0.85) for f in smooth_faces(grid, rng, 0.7, 1.0)]
     for axis in range(3):  # no particles cross the walls
         if not grid.periodic[axis]:
-            for sl in (fluid._wall_slice(axis, False), fluid._wall_slice(axis, True)):
+            for sl in (fluid_walls._wall_slice(axis, False), fluid_walls._wall_slice(axis, True)):
                 flux[axis][sl] = 0.0
     source = 1e-2 * rng.standard_normal(grid.shape)
     source -= source.mean()
     velocity = [1e-2 * rng.standard_normal(grid.face_shape(a)) for a in range(3)]
-    fluid._copy_periodic_faces(velocity, grid.periodic)
-    eps = fluid._faces(grid, eps, 1.0)
-    flux = fluid._faces(grid, flux, 0.0)
+    fluid_walls._copy_periodic_faces(velocity, grid.periodic)
+    eps = fluid_solver._faces(grid, eps, 1.0)
+    flux = fluid_solver._faces(grid, flux, 0.0)
     for axis in range(3):
         if not grid.periodic[axis]:
-            for sl in (fluid._wall_slice(axis, False), fluid._wall_slice(axis, True)):
+            for sl in (fluid_walls._wall_slice(axis, False), fluid_walls._wall_slice(axis, True)):
                 velocity[axis][sl] = 0.0
     return eps, flux, source, velocity
 
@@ -205,8 +210,8 @@ def test_projection_satisfies_mixture_continuity(periodic):
     solver = pressure.poisson_solver(grid.shape, grid.spacing, grid.periodic)
     eps, flux, source, velocity = mixture_case(grid, rng)
     dt = 1e-3
-    ones = fluid._faces(grid, None, 1.0)
-    zeros = fluid._faces(grid, None, 0.0)
+    ones = fluid_solver._faces(grid, None, 1.0)
+    zeros = fluid_solver._faces(grid, None, 0.0)
 
     def divergence(vel, e, q, s):
         out = np.empty(grid.shape)
@@ -231,7 +236,7 @@ def test_solvability_defect_is_reported():
     """A periodic box cannot absorb a net volume source: the removed mean is -mean(s)."""
     grid = Grid((8, 8, 8), 0.01, periodic=(True, True, True))
     source = np.full(grid.shape, 0.02)
-    state, diagnostics = fluid.step(grid, fluid.rest_state(grid), fluid.make_boundary(grid), DENSITY, VISCOSITY,
+    state, diagnostics = fluid_solver.step(grid, fluid_solver.rest_state(grid), fluid_walls.make_boundary(grid), DENSITY, VISCOSITY,
                                     1e-3, source=source)
     assert diagnostics.solvability_defect == pytest.approx(-0.02, rel=1e-12)
     assert np.abs(state.u).max() < 1e-15 and np.abs(state.w).max() < 1e-15
@@ -249,10 +254,10 @@ def taylor_green(n, speed, end_time, dt, scheme="koren"):
     xf, xc = grid.face_positions(0), grid.cell_centres(0)
     u = speed * np.sin(k * xf)[:, None, None] * np.cos(k * xc)[None, :, None] * np.ones(grid.face_shape(0))
     v = -speed * np.cos(k * xc)[:, None, None] * np.sin(k * xf)[None, :, None] * np.ones(grid.face_shape(1))
-    state = fluid.FluidState(u, v, np.zeros(grid.face_shape(2)), grid.zeros_cells())
-    boundary = fluid.make_boundary(grid)
+    state = fluid_solver.FluidState(u, v, np.zeros(grid.face_shape(2)), grid.zeros_cells())
+    boundary = fluid_walls.make_boundary(grid)
     for _ in range(int(round(end_time / dt))):
-        state, _ = fluid.step(grid, state, boundary, DENSITY, VISCOSITY, dt, advection=scheme)
+        state, _ = fluid_solver.step(grid, state, boundary, DENSITY, VISCOSITY, dt, advection=scheme)
     decay = np.exp(-2.0 * NU * k * k * end_time)
     error = np.abs(state.u - u * decay).max() / (speed * decay)
     amplitude = np.sum(state.u * u) / np.sum(u * u)
@@ -275,13 +280,13 @@ def test_plane_poiseuille_flow():
     With 16 cells the discrete maximum error is 1/(16^2 - 1) = 0.39 % of the centreline speed (second order)."""
     height, nz, force = 0.05, 16, 10.0
     grid = Grid((2, 2, nz), height / nz, periodic=(True, True, False))
-    boundary = fluid.make_boundary(grid)
-    state = fluid.rest_state(grid)
+    boundary = fluid_walls.make_boundary(grid)
+    state = fluid_solver.rest_state(grid)
     dt = 0.15 * grid.spacing**2 / NU
     z = grid.cell_centres(2)
     exact = force / (2.0 * VISCOSITY) * z * (height - z)
     for _ in range(int(2.0 * height**2 / NU / dt)):
-        state, diagnostics = fluid.step(grid, state, boundary, DENSITY, VISCOSITY, dt, body_force=(force, 0, 0))
+        state, diagnostics = fluid_solver.step(grid, state, boundary, DENSITY, VISCOSITY, dt, body_force=(force, 0, 0))
     error = np.abs(state.u - exact[None, None, :]).max() / exact.max()
     assert error < 4.5e-3
     assert error == pytest.approx(1.0 / (nz * nz - 1), rel=1e-3)
@@ -300,20 +305,20 @@ def test_momentum_balance_in_a_periodic_box():
     rng = np.random.default_rng(6)
     eps_old, flux, source, velocity = mixture_case(grid, rng)
     eps = [e * (1.0 - 0.02 * rng.random(e.shape)) for e in eps_old]
-    eps = fluid._faces(grid, eps, 1.0)
-    force = fluid._faces(grid, [50.0 * rng.standard_normal(grid.face_shape(a)) for a in range(3)], 0.0)
+    eps = fluid_solver._faces(grid, eps, 1.0)
+    force = fluid_solver._faces(grid, [50.0 * rng.standard_normal(grid.face_shape(a)) for a in range(3)], 0.0)
     body = np.array([3.0, -2.0, 7.0])
-    state = fluid.FluidState(*velocity, grid.zeros_cells())
-    boundary = fluid.make_boundary(grid)
+    state = fluid_solver.FluidState(*velocity, grid.zeros_cells())
+    boundary = fluid_walls.make_boundary(grid)
     dt = 2e-3
     for _ in range(3):
-        before = fluid.total_momentum(grid, state, DENSITY, eps_old)
-        state, diagnostics = fluid.step(grid, state, boundary, DENSITY, VISCOSITY, dt, eps_faces=eps,
+        before = fluid_solver.total_momentum(grid, state, DENSITY, eps_old)
+        state, diagnostics = fluid_solver.step(grid, state, boundary, DENSITY, VISCOSITY, dt, eps_faces=eps,
                                         eps_faces_old=eps_old, particle_flux=flux, source=source, force=force,
                                         body_force=body)
-        after = fluid.total_momentum(grid, state, DENSITY, eps)
-        pressure_force = fluid.pressure_force_density(grid, state.p, body)
-        unique = [fluid._unique_faces(grid, a) for a in range(3)]
+        after = fluid_solver.total_momentum(grid, state, DENSITY, eps)
+        pressure_force = fluid_solver.pressure_force_density(grid, state.p, body)
+        unique = [fluid_solver._unique_faces(grid, a) for a in range(3)]
         volume = grid.cell_volume
         fluid_share = np.array([np.sum((force[a] + eps[a] * pressure_force[a])[unique[a]]) for a in range(3)])
         droplet_share = np.array([np.sum(((1.0 - eps[a]) * pressure_force[a])[unique[a]]) for a in range(3)])
@@ -332,14 +337,14 @@ def test_inlet_and_outlet_balance_and_reach_steady_state():
     viscosity = 45.0
     grid = Grid.for_box((0.2, 0.2, 0.2), 0.02)
     inflow = 0.022 / DENSITY
-    boundary = fluid.make_boundary(grid, inlet=fluid.InletDisk((0.1, 0.1), 0.075),
-                                   outlet=fluid.OutletDisk("x+", (0.1, 0.03), 0.0075), inflow_flux=inflow)
+    boundary = fluid_walls.make_boundary(grid, inlet=boundaries.InletDisk((0.1, 0.1), 0.075),
+                                   outlet=boundaries.OutletDisk("x+", (0.1, 0.03), 0.0075), inflow_flux=inflow)
     assert boundary.outlet_weight.sum() * grid.spacing**2 == pytest.approx(np.pi * 0.0075**2, rel=1e-13)
-    state = fluid.rest_state(grid)
-    dt = fluid.stable_dt(grid, state, DENSITY, viscosity)
+    state = fluid_solver.rest_state(grid)
+    dt = fluid_solver.stable_dt(grid, state, DENSITY, viscosity)
     change = np.inf
     for n in range(600):
-        new, diagnostics = fluid.step(grid, state, boundary, DENSITY, viscosity, dt)
+        new, diagnostics = fluid_solver.step(grid, state, boundary, DENSITY, viscosity, dt)
         top = -np.sum(new.w[:, :, -1]) * grid.spacing**2
         side = np.sum(new.u[-1]) * grid.spacing**2
         assert top == pytest.approx(inflow, rel=1e-13)
@@ -360,14 +365,14 @@ def test_box_at_rest_stays_at_rest(periodic):
     """No forcing: exactly zero. A uniform (hydrostatic-like) body force with eps != 1: balanced by a linear
     pressure, the velocity stays at round-off (no spurious currents)."""
     grid = Grid((8, 6, 10), 0.01, periodic=periodic)
-    boundary = fluid.make_boundary(grid)
-    state, diagnostics = fluid.step(grid, fluid.rest_state(grid), boundary, DENSITY, VISCOSITY, 5e-3)
+    boundary = fluid_walls.make_boundary(grid)
+    state, diagnostics = fluid_solver.step(grid, fluid_solver.rest_state(grid), boundary, DENSITY, VISCOSITY, 5e-3)
     assert all(np.all(a == 0.0) for a in state)
     eps = smooth_faces(grid, np.random.default_rng(7), 0.7, 1.0)
     body = (0.0, 0.0, -DENSITY * 9.81)
-    state = fluid.rest_state(grid)
+    state = fluid_solver.rest_state(grid)
     for _ in range(20):
-        state, diagnostics = fluid.step(grid, state, boundary, DENSITY, VISCOSITY, 5e-3, eps_faces=eps,
+        state, diagnostics = fluid_solver.step(grid, state, boundary, DENSITY, VISCOSITY, 5e-3, eps_faces=eps,
                                         body_force=body)
     scale = 5e-3 * 9.81  # the velocity one step of unbalanced force would give
     assert max(np.abs(a).max() for a in state[:3]) < 1e-12 * scale
@@ -386,13 +391,13 @@ def test_high_cell_reynolds_shear_layer_stays_bounded():
     u = np.ones(grid.face_shape(0)) * (speed * np.where(np.abs(y - length / 2) < length / 4, 1.0, -1.0))[None, :,
                                                                                                           None]
     v = np.ones(grid.face_shape(1)) * (0.05 * speed * np.sin(2 * np.pi * x / length))[:, None, None]
-    state = fluid.FluidState(u, v, np.zeros(grid.face_shape(2)), grid.zeros_cells())
-    boundary = fluid.make_boundary(grid)
-    energy0 = sum(np.sum(a[fluid._unique_faces(grid, i)] ** 2) for i, a in enumerate(state[:3]))
+    state = fluid_solver.FluidState(u, v, np.zeros(grid.face_shape(2)), grid.zeros_cells())
+    boundary = fluid_walls.make_boundary(grid)
+    energy0 = sum(np.sum(a[fluid_solver._unique_faces(grid, i)] ** 2) for i, a in enumerate(state[:3]))
     for _ in range(150):
-        dt = fluid.stable_dt(grid, state, DENSITY, VISCOSITY, cfl=0.4)
-        state, diagnostics = fluid.step(grid, state, boundary, DENSITY, VISCOSITY, dt)
-    energy = sum(np.sum(a[fluid._unique_faces(grid, i)] ** 2) for i, a in enumerate(state[:3]))
+        dt = fluid_solver.stable_dt(grid, state, DENSITY, VISCOSITY, cfl=0.4)
+        state, diagnostics = fluid_solver.step(grid, state, boundary, DENSITY, VISCOSITY, dt)
+    energy = sum(np.sum(a[fluid_solver._unique_faces(grid, i)] ** 2) for i, a in enumerate(state[:3]))
     assert np.isfinite(energy) and energy <= energy0
     assert max(np.abs(a).max() for a in state[:3]) < 1.5 * speed
     assert diagnostics.cell_reynolds > 900.0
@@ -400,15 +405,15 @@ def test_high_cell_reynolds_shear_layer_stays_bounded():
 
 def test_stable_dt_and_diagnostics():
     grid = Grid.for_box((0.2, 0.2, 0.2), 0.005)
-    state = fluid.rest_state(grid)
+    state = fluid_solver.rest_state(grid)
     viscous_limit = grid.spacing**2 / (6.0 * NU)
-    assert fluid.stable_dt(grid, state, DENSITY, VISCOSITY) == pytest.approx(viscous_limit)
+    assert fluid_solver.stable_dt(grid, state, DENSITY, VISCOSITY) == pytest.approx(viscous_limit)
     assert viscous_limit == pytest.approx(0.0292, rel=1e-2)
     small = Grid((4, 4, 4), 0.005, periodic=(True, True, True))
-    moving = fluid.FluidState(np.full(small.face_shape(0), 0.1), *small.zeros_faces()[1:], small.zeros_cells())
-    dt = fluid.stable_dt(small, moving, DENSITY, VISCOSITY)
+    moving = fluid_solver.FluidState(np.full(small.face_shape(0), 0.1), *small.zeros_faces()[1:], small.zeros_cells())
+    dt = fluid_solver.stable_dt(small, moving, DENSITY, VISCOSITY)
     assert dt * (2 * 0.1 / small.spacing + 6 * NU / small.spacing**2) == pytest.approx(1.0)
-    _, diagnostics = fluid.step(small, moving, fluid.make_boundary(small), DENSITY, VISCOSITY, 1e-3)
+    _, diagnostics = fluid_solver.step(small, moving, fluid_walls.make_boundary(small), DENSITY, VISCOSITY, 1e-3)
     assert diagnostics.cell_reynolds == pytest.approx(DENSITY * 0.1 * small.spacing / VISCOSITY)
     assert diagnostics.courant == pytest.approx(0.1 * 1e-3 / small.spacing)
     assert diagnostics.viscous_number == pytest.approx(NU * 1e-3 / small.spacing**2)
@@ -420,14 +425,14 @@ def test_outlet_closes_the_mixture_volume_balance(side):
     volume source: the outflow takes exactly inflow + integral of s - particle inflow, so no defect remains."""
     grid = Grid.for_box((0.1, 0.08, 0.12), 0.01)
     inflow = 2e-6
-    boundary = fluid.make_boundary(grid, inlet=((0.05, 0.04), 0.02), outlet=(side, (0.04, 0.03), 0.008),
+    boundary = fluid_walls.make_boundary(grid, inlet=((0.05, 0.04), 0.02), outlet=(side, (0.04, 0.03), 0.008),
                                    inflow_flux=inflow)
     rng = np.random.default_rng(8)
     eps = smooth_faces(grid, rng, 0.8, 1.0)
     flux = grid.zeros_faces()
     flux[2][:, :, -1] = -1e-4 * boundary.inlet_weight  # droplets fed downward through the inlet
     source = 1e-4 * rng.random(grid.shape)
-    state, diagnostics = fluid.step(grid, fluid.rest_state(grid), boundary, DENSITY, VISCOSITY, 1e-3,
+    state, diagnostics = fluid_solver.step(grid, fluid_solver.rest_state(grid), boundary, DENSITY, VISCOSITY, 1e-3,
                                     eps_faces=eps, particle_flux=flux, source=source)
     particles_in = 1e-4 * boundary.inlet_weight.sum() * grid.spacing**2
     expected = inflow + source.sum() * grid.cell_volume + particles_in
@@ -437,7 +442,7 @@ def test_outlet_closes_the_mixture_volume_balance(side):
     assert abs(diagnostics.solvability_defect) < 1e-13 * scale
     assert diagnostics.divergence_residual < 1e-10 * scale
     axis, upper = {"x-": (0, False), "x+": (0, True), "y-": (1, False), "y+": (1, True)}[side]
-    wall = fluid._wall_slice(axis, upper)
+    wall = fluid_walls._wall_slice(axis, upper)
     velocity = (state.u, state.v)[axis]
     outward = 1.0 if upper else -1.0
     assert outward * np.sum(eps[axis][wall] * velocity[wall]) * grid.spacing**2 == pytest.approx(expected,

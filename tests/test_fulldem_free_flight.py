@@ -9,8 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from fulldem import dem
+from fulldem.dem import integrators
+from fulldem.dem import stepper as dem_stepper
 from fulldem.droplets import DropletStore
+
 
 RHO = 5100.0
 MU = 0.45
@@ -20,7 +22,7 @@ BODY = (0.0, 0.0, -3.75)  # buoyant weight per mass of matte in slag [m/s^2]
 
 
 def _stepper(store, free_flight, box=0.02, periodic=(False, False, False), skin=0.1e-3, body=BODY, **kw):
-    stepper = dem.DemStepper(store, (0.0, 0.0, 0.0), (box,) * 3, periodic, H, 5.0, 0.5e-3, 0.5, skin, body,
+    stepper = dem_stepper.DemStepper(store, (0.0, 0.0, 0.0), (box,) * 3, periodic, H, 5.0, 0.5e-3, 0.5, skin, body,
                              sort_on_rebuild=False, free_flight=free_flight, **kw)
     stepper.droplets_changed()
     stepper.set_drag(3 * math.pi * MU * store.diameter[: store.capacity])
@@ -164,7 +166,7 @@ def test_dense_cluster_conserves_momentum_as_before():
 def test_a_breach_redoes_the_advance_with_every_droplet_sub_stepped(monkeypatch):
     position, diameter, velocity, fluid = _cluster_in_cloud()
     # a negative margin: every sub-stepped droplet in contact leaves its budget, so the advance must be redone
-    monkeypatch.setattr(dem, "FREE_FLIGHT_MARGIN", -0.01)
+    monkeypatch.setattr(dem_stepper, "FREE_FLIGHT_MARGIN", -0.01)
     free, stepper, impulse_free = _run(position, diameter, velocity, fluid, True, periodic=(True, True, True))
     stepped, _, impulse_stepped = _run(position, diameter, velocity, fluid, False, periodic=(True, True, True))
     counts = stepper.free_flight_counts
@@ -181,7 +183,7 @@ def test_a_list_check_inside_the_advance_redoes_it(monkeypatch):
     steps reporting a travel bound over skin/2) undoes the advance, which is redone with every droplet sub-stepped:
     the result is that of the sub-steps bit for bit."""
     position, diameter, velocity, fluid = _cluster_in_cloud()
-    real = dem.step_half_many
+    real = integrators.step_half_many
     calls = []
 
     def stop_once(steps, travel_bound, half_skin, *rest):
@@ -191,9 +193,9 @@ def test_a_list_check_inside_the_advance_redoes_it(monkeypatch):
         taken, peak, worst, _, pending = real(10, travel_bound, half_skin, *rest)
         return taken, peak, worst, 2.0 * half_skin, pending
 
-    monkeypatch.setattr(dem, "step_half_many", stop_once)
+    monkeypatch.setattr(dem_stepper, "step_half_many", stop_once)
     free, stepper, impulse_free = _run(position, diameter, velocity, fluid, True, periodic=(True, True, True))
-    monkeypatch.setattr(dem, "step_half_many", real)
+    monkeypatch.setattr(dem_stepper, "step_half_many", real)
     stepped, _, impulse_stepped = _run(position, diameter, velocity, fluid, False, periodic=(True, True, True))
     counts = stepper.free_flight_counts
     assert counts.list_checks == 1 and counts.advances == 0 and calls[0] == STEPS

@@ -9,11 +9,15 @@ import meshio
 import numpy as np
 import pytest
 
-import fulldem.io as fio
 from fulldem.droplets import DropletStore
-from fulldem.fluid import FluidState
-from fulldem.grid import Grid
-from fulldem.io import CheckpointError, Progress, SnapshotWriter, load_checkpoint, save_checkpoint
+from fulldem.fluid.grid import Grid
+from fulldem.fluid.solver import FluidState
+from fulldem.io import progress as fio_progress
+from fulldem.io import snapshots as fio_snapshots
+from fulldem.io.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from fulldem.io.progress import Progress
+from fulldem.io.snapshots import SnapshotWriter
+
 
 pytest.importorskip("tqdm")
 
@@ -141,7 +145,7 @@ def test_progress_first_update_does_not_count_towards_the_rate():
 
 
 def test_progress_notebook_uses_a_bar(monkeypatch):
-    monkeypatch.setattr(fio, "_in_notebook", lambda: True)
+    monkeypatch.setattr(fio_progress, "_in_notebook", lambda: True)
     stream = io.StringIO()
     monkeypatch.setattr("sys.stderr", stream)
     bar = Progress(0.0, 1.0)
@@ -190,7 +194,7 @@ def test_snapshots_read_back_with_meshio(tmp_path):
 
 def test_mesh_bytes_removes_its_temporary_file_on_failure(tmp_path, monkeypatch):
     made = []
-    real_mkstemp = fio.tempfile.mkstemp
+    real_mkstemp = fio_snapshots.tempfile.mkstemp
 
     def mkstemp(*args, **kwargs):
         fd, name = real_mkstemp(*args, dir=tmp_path, **kwargs)
@@ -202,10 +206,10 @@ def test_mesh_bytes_removes_its_temporary_file_on_failure(tmp_path, monkeypatch)
             fh.write(b"partial")
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(fio.tempfile, "mkstemp", mkstemp)
-    monkeypatch.setattr(fio.meshio, "write", broken_write)
+    monkeypatch.setattr(fio_snapshots.tempfile, "mkstemp", mkstemp)
+    monkeypatch.setattr(fio_snapshots.meshio, "write", broken_write)
     with pytest.raises(RuntimeError, match="disk full"):
-        fio._mesh_bytes(meshio.Mesh(np.zeros((1, 3)), [("vertex", np.zeros((1, 1), dtype=int))]))
+        fio_snapshots._mesh_bytes(meshio.Mesh(np.zeros((1, 3)), [("vertex", np.zeros((1, 1), dtype=int))]))
     assert made and not any(Path(p).exists() for p in made)
 
 

@@ -10,6 +10,7 @@ from fulldem.driver import RunError, run_case
 from settler.cases import load_case
 from settler.output import TIME_SERIES, read_time_series
 
+
 SMALL = ["fulldem.cell_size=0.01", "fulldem.output_interval=0.02", "fulldem.snapshot_interval=0.05",
          "fulldem.checkpoint_interval=1000"]
 
@@ -87,7 +88,7 @@ def test_progress_eta_extrapolates_from_the_first_report(monkeypatch):
     import io
     import types
 
-    import fulldem.io as fio
+    from fulldem.io import progress as fio
 
     clock = iter([0.0, 30.0, 32.0])
     monkeypatch.setattr(fio, "_time", types.SimpleNamespace(perf_counter=lambda: next(clock)))

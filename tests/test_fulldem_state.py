@@ -6,9 +6,10 @@ import pytest
 
 import fulldem.droplets as fdrop
 from fulldem.driver import checkpoint_state, restore_state
-from fulldem.io import load_checkpoint, save_checkpoint
+from fulldem.io.checkpoint import load_checkpoint, save_checkpoint
 from fulldem.stepper import Simulation
 from settler.cases import load_case
+
 
 SMALL = ["fulldem.cell_size=0.01", "fulldem.snapshot_interval=0"]
 
@@ -137,7 +138,7 @@ def test_merges_at_the_event_point_keep_momentum_and_matte():
 def test_submodels_act_at_the_step_event_points():
     """A submodel's at_start runs before the step's deposits (a droplet it adds takes part in that step) and its
     at_end after the step (at the new time); the built-in ones are the feed, merges and exits, in that order."""
-    from fulldem.submodels import Exits, Feed, Merges, Submodel
+    from fulldem.submodels.base import Exits, Feed, Merges, Submodel
 
     class Recorder(Submodel):
         name = "recorder"

@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fulldem.verification import check_cloud, check_hindered, check_homogeneous
+from fulldem.cases.cloud import check_cloud
+from fulldem.cases.suspensions import check_hindered, check_homogeneous
 
 
 # ---------------------------------------------------------------------------------------------------- hindered settling

@@ -15,6 +15,7 @@ from settler.cases import SCHEMA, load_case
 from settler.derived import settling_velocity
 from settler.physics.registry import Entry, Registry
 
+
 G = p.STANDARD_GRAVITY
 RHO_D, RHO_S, MU, SIGMA = 5100.0, 3150.0, 0.45, 0.1  # matte, slag [kg/m^3], slag viscosity [Pa s], sigma [N/m]
 
@@ -112,7 +113,7 @@ def test_terminal_velocity_balances_drag_and_buoyant_weight(law, viscosity_ratio
 def test_terminal_velocity_balances_the_fulldem_drag_kernel(law, viscosity_ratio):
     """The shared terminal velocity is where fulldem's drag coefficient (eps = 1, no hindrance) carries the buoyant
     weight: one law, honoured the same way by both."""
-    from fulldem.forces import drag_coefficient
+    from fulldem.coupling.drag import drag_coefficient
 
     d = 5e-3
     v = p.terminal_velocity(d, RHO_D, RHO_S, MU, p.DRAG_LAWS[law], viscosity_ratio)

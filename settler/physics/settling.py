@@ -135,7 +135,7 @@ def terminal_velocity(diameter, density_droplet, density_fluid, viscosity, law, 
 
     diameter [m], densities [kg/m^3], viscosity of the fluid [Pa s], viscosity_ratio lam = mu_droplet / mu_fluid:
     lam > 0 divides the drag by the Hadamard-Rybczynski factor (a clean fluid drop), exactly as
-    :func:`fulldem.forces.drag_coefficient` applies it; 0 leaves a rigid sphere. The drop then settles where
+    :func:`fulldem.coupling.drag.drag_coefficient` applies it; 0 leaves a rigid sphere. The drop then settles where
     v f(Re(v)) = HR(lam) v_Stokes, i.e. at the law's velocity under gravity HR(lam) g: HR x the rigid velocity at
     Re -> 0, a little less at finite Re (f grows with v). Single droplet: void fraction 1, no hindrance.
     """
@@ -198,7 +198,7 @@ def hindrance_factor(void_fraction, reynolds, hindrance):
     """Factor on the drag coefficient beta of model A for the hindrance of code ``hindrance`` (:data:`HINDRANCE`) [-].
 
     HINDRANCE_DI_FELICE: eps^(1 - chi(Re)) -- Di Felice's eps^-chi on a drag written with the superficial slip
-    eps |u - v| (Zhou et al. 2010, J. Fluid Mech. 661, 482, model A; see :mod:`fulldem.forces`); HINDRANCE_NONE: 1.
+    eps |u - v| (Zhou et al. 2010, J. Fluid Mech. 661, 482, model A; see :mod:`fulldem.coupling.drag`); HINDRANCE_NONE: 1.
     Both give 1 at void_fraction = 1. reynolds: Re = rho eps |u - v| d / mu.
     """
     if hindrance == HINDRANCE_DI_FELICE:

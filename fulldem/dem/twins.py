@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import contacts
-from .dem import Y_LOW, Z_LOW
-from .droplets import COALESCING
+from ..droplets import COALESCING
+from . import laws
+from .walls import Y_LOW, Z_LOW
 
 
 def contact_forces_reference(position, velocity, diameter, mass, flags, partner, count, pair_i, pair_j,
@@ -18,7 +18,7 @@ def contact_forces_reference(position, velocity, diameter, mass, flags, partner,
 
     Returns (force (count, 3) [N], largest overlap ratio [-]).
     """
-    law_force = {c.code: c.force for c in contacts.CONTACT_LAWS.values()}[law]
+    law_force = {c.code: c.force for c in laws.CONTACT_LAWS.values()}[law]
     pos, vel = position[:count], velocity[:count]
     d, m = diameter[:count], mass[:count]
     i, j = np.asarray(pair_i), np.asarray(pair_j)
@@ -50,7 +50,7 @@ def wall_forces_reference(position, velocity, diameter, mass, count, box_lower, 
                           absorbing_bottom, outlet_side, outlet_height, outlet_transverse, outlet_radius,
                           stiffness_ref, diameter_ref, zeta, law):
     """NumPy twin of :func:`wall_forces`: returns (wall force (count, 3) [N], largest overlap ratio [-])."""
-    law_force = np.vectorize({c.code: c.force for c in contacts.CONTACT_LAWS.values()}[law].py_func)
+    law_force = np.vectorize({c.code: c.force for c in laws.CONTACT_LAWS.values()}[law].py_func)
     pos, vel, d, m = position[:count], velocity[:count], diameter[:count], mass[:count]
     k = stiffness_ref * (d / diameter_ref) ** 2
     gamma = 2.0 * zeta * np.sqrt(k * m)

@@ -61,8 +61,8 @@ class Exits(Submodel):
 #: Submodels switched on by a case section's ``enabled`` key: section -> "module:Class" of the submodel (constructed
 #: with the case; named, not imported, so that a submodel's module may import this one), or None where the engine
 #: does not have it yet (a run then says so; see fulldem.driver).
-CASE_SUBMODELS: dict[str, str | None] = {"coalescence": "fulldem.coalescence:Coalescence",
-                                         "reaction": "fulldem.reaction:Reaction"}
+CASE_SUBMODELS: dict[str, str | None] = {"coalescence": "fulldem.submodels.coalescence:Coalescence",
+                                         "reaction": "fulldem.submodels.reaction:Reaction"}
 
 
 def submodel_class(section: str) -> type[Submodel]:

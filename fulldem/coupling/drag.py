@@ -1,7 +1,7 @@
 """Fluid-droplet force laws lifted onto all droplets: drag coefficient with Reynolds and void-fraction corrections.
 
 The coupling is the volume-averaged *model A* ("set I" of Zhou, Kuang, Chu & Yu, J. Fluid Mech. 661 (2010) 482),
-as in :mod:`fulldem.fluid`: the fluid feels -eps grad p, a droplet feels its buoyant weight (rho_p - rho_f) V g, the
+as in :mod:`fulldem.fluid.solver`: the fluid feels -eps grad p, a droplet feels its buoyant weight (rho_p - rho_f) V g, the
 pressure-gradient force -V grad p (dynamic pressure) and the drag beta (u - v), with Di Felice's voidage function
 
     beta = 3 pi mu d f(Re) eps^(1 - chi(Re)),  Re = rho eps |u - v| d / mu
@@ -18,12 +18,12 @@ import math
 
 from numba import njit, prange
 
-from .coupling import SELF_CORRECTION_CAP
 # The drag laws and hindrance corrections, their kernel codes and citations, are the shared registries of
 # settler.physics (name -> code); drag_factor and hindrance_factor switch on those codes.
-from settler.physics import (DRAG_LAWS, DRAG_SCHILLER_NAUMANN, DRAG_STOKES, HINDRANCE,  # noqa: F401
-                             HINDRANCE_DI_FELICE, HINDRANCE_NONE, drag_factor, hadamard_rybczynski_factor,
-                             hindrance_factor)
+from settler.physics import drag_factor, hadamard_rybczynski_factor, hindrance_factor
+
+from .mobility import SELF_CORRECTION_CAP
+
 
 #: Void fractions below this are clipped in the hindrance factor (a packed bed is about 0.36).
 EPS_FLOOR = 0.3

@@ -30,6 +30,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+
 #: Cells per droplet above which the cell size is enlarged (keeps the cell arrays small in mostly empty boxes).
 MAX_CELLS_PER_DROPLET = 8
 
@@ -359,7 +360,7 @@ class NeighbourList:
     builds), ``reference_position`` (cap, 3) [m] and ``reference_diameter`` (cap,) [m] at the last build,
     ``cell_size`` (3,) [m] and ``shape`` (3,) of the last binning, ``longest_row`` (most partners of a droplet),
     ``longest_jump`` (largest |j - i| of an entry: how far apart in memory partners lie, see
-    :func:`fulldem.dem.slab_count`).
+    :func:`fulldem.dem.pairs.slab_count`).
 
     Geometry: ``box_lower`` (3,) [m], ``box_size`` (3,) [m], ``periodic`` (3,) bool.
     """
@@ -439,7 +440,7 @@ class NeighbourList:
         The cells are taken in lexicographic order with the *slowest* axis chosen as the one whose fullest slab of
         cells holds the fewest droplets (a change needs fewer than :data:`AXIS_SWITCH` times the current one's). List
         partners then lie at most about two such slabs apart in memory, which is what the half-list kernels' slabs
-        must exceed to run in parallel (:func:`fulldem.dem.slab_count`). A flat layer of droplets under the roof
+        must exceed to run in parallel (:func:`fulldem.dem.pairs.slab_count`). A flat layer of droplets under the roof
         sorted with z slowest puts a whole layer between partners (a third of the droplets in the simple case),
         leaving one slab per phase: one thread. The order is kept (``axes``) for the following builds, whose cells
         are numbered the same way, so a half list's rows hold partners ahead in memory (measured 15 % faster in a
@@ -588,28 +589,6 @@ def brute_force_pairs(position, diameter, count, skin, box_size, periodic):
     cut = 0.5 * (dia[:, None] + dia[None, :]) + skin
     i, j = np.nonzero(np.triu(dist2 < cut * cut, k=1))
     return i.astype(np.int64), j.astype(np.int64)
-
-
-@njit(cache=True, parallel=True)
-def _gather_1d(source, order, out):
-    for p in prange(order.shape[0]):
-        out[p] = source[order[p]]
-
-
-@njit(cache=True, parallel=True)
-def _gather_2d(source, order, out):
-    for p in prange(order.shape[0]):
-        q = order[p]
-        for a in range(source.shape[1]):
-            out[p, a] = source[q, a]
-
-
-def permute_rows(array, order) -> None:
-    """``array[:n] = array[order]`` for n = len(order), gathered in parallel (1-D or 2-D arrays)."""
-    n = order.shape[0]
-    work = np.empty((n,) + array.shape[1:], dtype=array.dtype)
-    (_gather_1d if array.ndim == 1 else _gather_2d)(array, order, work)
-    array[:n] = work
 
 
 def reorder_store(store, order) -> None:

@@ -6,7 +6,7 @@ Given a predicted face velocity ``u*`` the projection finds ``phi`` (cell-centre
 
 so that the discrete mixture continuity ``div(eps u + q) = s`` holds to solver tolerance in every cell. ``eps`` is
 the void fraction on faces, ``q`` the particle volume flux on faces [m/s], ``s`` the volume source per cell [1/s]
-(:mod:`fulldem.grid` gives the layout). Wall faces carry imposed normal velocities and get no correction (the
+(:mod:`fulldem.fluid.grid` gives the layout). Wall faces carry imposed normal velocities and get no correction (the
 Neumann condition of ``phi``); on a periodic axis the first face stands for the last one too, and its value is the
 one used.
 
@@ -31,11 +31,9 @@ import numpy as np
 from numba import njit
 from scipy import fft as sfft
 
+
 #: Threads for scipy.fft.
 FFT_WORKERS = 2
-
-
-# --------------------------------------------------------------------------------------------------- kernels
 
 
 @njit(cache=True)
@@ -53,12 +51,6 @@ def mixture_divergence_kernel(u, v, w, ex, ey, ez, qx, qy, qz, source, spacing, 
                         + ez[i, j, k + 1] * w[i, j, k + 1] + qz[i, j, k + 1]
                         - ez[i, j, k] * w[i, j, k] - qz[i, j, k])
                 out[i, j, k] = flux * inv_h - source[i, j, k]
-
-
-def mixture_divergence_reference(u, v, w, ex, ey, ez, qx, qy, qz, source, spacing):
-    """NumPy twin of :func:`mixture_divergence_kernel`."""
-    fx, fy, fz = ex * u + qx, ey * v + qy, ez * w + qz
-    return (np.diff(fx, axis=0) + np.diff(fy, axis=1) + np.diff(fz, axis=2)) / spacing - source
 
 
 @njit(cache=True)
@@ -98,27 +90,6 @@ def apply_operator_kernel(phi, ex, ey, ez, spacing, px, py, pz, out):
                 out[i, j, k] = -acc * inv_h2
 
 
-def _face_gradient_reference(phi, axis, spacing, periodic):
-    """(phi[i] - phi[i-1]) / h on the faces normal to ``axis``; wall faces 0, periodic face n = face 0."""
-    n = phi.shape[axis]
-    inner = np.diff(phi, axis=axis) / spacing
-    if periodic:
-        wrap = (np.take(phi, [0], axis=axis) - np.take(phi, [n - 1], axis=axis)) / spacing
-    else:
-        wrap = np.zeros_like(np.take(phi, [0], axis=axis))
-    return np.concatenate([wrap, inner, wrap], axis=axis)
-
-
-def apply_operator_reference(phi, ex, ey, ez, spacing, px, py, pz):
-    """NumPy twin of :func:`apply_operator_kernel`."""
-    out = np.zeros_like(phi)
-    for axis, (eps, periodic) in enumerate(((ex, px), (ey, py), (ez, pz))):
-        eps = _periodic_consistent(eps, axis) if periodic else eps
-        flux = eps * _face_gradient_reference(phi, axis, spacing, periodic)
-        out -= np.diff(flux, axis=axis) / spacing
-    return out
-
-
 @njit(cache=True)
 def subtract_gradient_kernel(u, v, w, phi, scale, spacing, px, py, pz):
     """u -= scale * grad(phi) on the faces where the velocity is free: interior faces and, on periodic axes,
@@ -143,15 +114,6 @@ def subtract_gradient_kernel(u, v, w, phi, scale, spacing, px, py, pz):
                 elif pz:
                     w[i, j, 0] -= c * (phi[i, j, 0] - phi[i, j, nz - 1])
                     w[i, j, nz] = w[i, j, 0]
-
-
-def subtract_gradient_reference(u, v, w, phi, scale, spacing, px, py, pz):
-    """NumPy twin of :func:`subtract_gradient_kernel` (returns new arrays)."""
-    out = []
-    for axis, (vel, periodic) in enumerate(((u, px), (v, py), (w, pz))):
-        grad = _face_gradient_reference(phi, axis, spacing, periodic)
-        out.append(vel - scale * grad)
-    return tuple(out)
 
 
 @njit(cache=True)
@@ -182,13 +144,6 @@ def cg_direction_kernel(direction, preconditioned, beta):
         direction[n] = preconditioned[n] + beta * direction[n]
 
 
-def cg_update_reference(phi, residual, direction, operator_direction, alpha):
-    """NumPy twin of :func:`cg_update_kernel` (returns new phi, residual and |r|^2)."""
-    phi = phi + alpha * direction
-    residual = residual - alpha * operator_direction
-    return phi, residual, float(np.sum(residual * residual))
-
-
 def _periodic_consistent(face_array, axis):
     """A copy of a face array whose last face along ``axis`` equals its first (periodic axes)."""
     out = np.array(face_array, dtype=float, copy=True)
@@ -198,9 +153,6 @@ def _periodic_consistent(face_array, axis):
     first[axis] = 0
     out[tuple(index)] = out[tuple(first)]
     return out
-
-
-# -------------------------------------------------------------------------------- fast constant-coefficient solve
 
 
 class PoissonSolver:
@@ -326,9 +278,6 @@ class PoissonSolver:
 def poisson_solver(shape, spacing, periodic) -> PoissonSolver:
     """The (cached) :class:`PoissonSolver` of a grid: ``poisson_solver(grid.shape, grid.spacing, grid.periodic)``."""
     return PoissonSolver(tuple(shape), float(spacing), tuple(bool(p) for p in periodic))
-
-
-# ------------------------------------------------------------------------------------------------- projection
 
 
 class Projection(NamedTuple):

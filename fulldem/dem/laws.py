@@ -32,6 +32,7 @@ from typing import NamedTuple
 
 from numba import njit
 
+
 #: Integer code of the linear spring-dashpot law (see :func:`hooke_normal_force`).
 HOOKE = 0
 

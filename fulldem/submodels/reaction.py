@@ -34,12 +34,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from numba import njit, prange
 
 from settler.physics import matte_density, reaction_fraction, relative_diameter
 
-from .submodels import Submodel
+from .base import Submodel
+
 
 MODES = ("continuous", "stepped")
 

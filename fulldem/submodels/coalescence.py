@@ -2,7 +2,7 @@
 
 At every droplet-droplet contact the DEM kernels record the *first* contact of a pair -- its overlap is less than its
 approach speed times the DEM step, so a step earlier the two did not touch -- with its normal approach speed, per
-neighbour-list entry (:class:`fulldem.dem.Contacts`; threads never write the same entry). At the fluid step's
+neighbour-list entry (:class:`fulldem.dem.records.Contacts`; threads never write the same entry). At the fluid step's
 end-of-step event point (:mod:`fulldem.submodels`) this submodel, in a fixed order:
 
 1. grows every marked pair's *contact* diameters by ``growth_rate`` x d_m x dt (d_m the merged diameter), up to
@@ -60,8 +60,9 @@ import numpy as np
 from settler.physics import RULE_STEP, coalescence_probability, collision_merges, merged_diameter_v
 from settler.physics.coalescence import PROBABILITY_FORMS
 
-from .droplets import COALESCING
-from .submodels import Submodel
+from ..droplets import COALESCING
+from .base import Submodel
+
 
 #: Bins of the merges-by-size table: droplet diameters [m], edges doubling the volume per bin (d ratio 2^(1/3))
 #: from 10 um to 0.1 m (41 edges), plus a bin below and one above.

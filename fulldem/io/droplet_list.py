@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .droplets import DropletStore
+from ..droplets import DropletStore
+
 
 #: Required columns and their units.
 REQUIRED_COLUMNS = {"x": "m", "y": "m", "z": "m", "diameter": "m"}
