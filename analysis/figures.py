@@ -34,6 +34,7 @@ default the middle of the depth).
 
 from __future__ import annotations
 
+import argparse
 import io
 import math
 import xml.etree.ElementTree as ET
@@ -44,6 +45,9 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from settler.output import atomic_write_bytes, read_time_series
+
+from .files import NoData, check_run, droplets_file, pick_snapshot, slag_file, snapshot_files
+
 
 #: The files :func:`render_all` writes: figure name -> PNG file name (the seed paper's figure number where it has one).
 FIGURE_FILES = {
@@ -66,78 +70,7 @@ SLAB_DEPTH_FRACTION = 0.02
 QUIVER_ARROWS = 20
 
 
-class NoData(LookupError):
-    """A figure's inputs are not in the run folder (a missing file, a column that is all NaN, a snapshot without
-    droplets); the message is the one-line reason."""
-
-
 # ------------------------------------------------------------------------------------------------------- readers
-def check_run(run) -> Path:
-    """``run`` as a Path after checking that it is a run folder: a folder holding ``timeseries.csv`` or
-    ``snapshots.pvd``. Raises FileNotFoundError naming the folder and what is missing."""
-    folder = Path(run)
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{folder}: no such run folder" if not folder.exists()
-                                else f"{folder}: is a file, not a run folder")
-    if not (folder / "timeseries.csv").is_file() and not (folder / "snapshots.pvd").is_file():
-        raise FileNotFoundError(f"{folder}: not a run folder (no timeseries.csv and no snapshots.pvd); give the "
-                                "--out folder of a 'settler full' run")
-    return folder
-
-
-def snapshot_files(run) -> list[tuple[float, Path | None, Path | None]]:
-    """The snapshots listed in ``RUN/snapshots.pvd``: (time [s], droplets .vtu, fluid .vtu) sorted by time.
-
-    A file is None where the collection lists none for that time or the file is not on disk. No ``snapshots.pvd``:
-    an empty list. Part 0 of the collection is the droplets, part 1 the slag grid (a file without a part attribute
-    is told by its name, ``droplets_*`` or ``fluid_*``).
-    """
-    folder = check_run(run)
-    pvd = folder / "snapshots.pvd"
-    if not pvd.is_file():
-        return []
-    try:
-        root = ET.parse(pvd).getroot()
-    except ET.ParseError as exc:
-        raise NoData(f"snapshots.pvd cannot be read ({exc})") from None
-    found: dict[float, list] = {}
-    for entry in root.iter("DataSet"):
-        try:
-            time = float(entry.get("timestep", "nan"))
-        except ValueError:
-            continue
-        name = entry.get("file")
-        if not name or not math.isfinite(time):
-            continue
-        part = entry.get("part")
-        is_droplets = part == "0" if part is not None else Path(name).name.startswith("droplets")
-        path = folder / name
-        slot = found.setdefault(time, [None, None])
-        slot[0 if is_droplets else 1] = path if path.is_file() else None
-    return [(t, d, f) for t, (d, f) in sorted(found.items())]
-
-
-def _pick_snapshot(run, time, part):
-    """(time [s], file) of the snapshot nearest ``time`` [s] (None: the last; of two equally near, the later):
-    its droplets file (``part`` 0) or fluid file (1). Raises NoData naming what is missing."""
-    what = ("droplets", "slag")[part]
-    snapshots = snapshot_files(run)
-    if not snapshots:
-        raise NoData("no snapshots (no snapshots.pvd, or it lists none)")
-    if time is not None:
-        time = float(time)
-        if not math.isfinite(time):
-            raise ValueError(f"time = {time!r}: give a finite snapshot time [s]")
-        t, droplets, fluid = min(snapshots, key=lambda s: (abs(s[0] - time), -s[0]))
-    else:
-        t, droplets, fluid = snapshots[-1]
-    path = (droplets, fluid)[part]
-    if path is None:
-        raise NoData(f"the snapshot at t = {t:g} s has no {what} file (none listed in snapshots.pvd, or "
-                     "not on disk)")
-    return t, path
-
-
 def _reference(run):
     """The stored reference (analysis.reference) if ``run`` is a ``data/reference/<case>`` folder, else None."""
     folder = check_run(run)
@@ -171,39 +104,18 @@ def read_droplets(run, time=None) -> tuple[float, pd.DataFrame]:
     ident [-] and merged (1.0 if the droplet was formed by coalescence, else 0.0; newer runs only). A snapshot
     without droplets gives an empty frame with these columns. Raises NoData if there is no such snapshot file.
     """
-    import meshio
-
     reference = _reference(run)
     if reference is not None:  # a stored reference: its float32 snapshots
         k, t = _reference_snapshot(reference, time)
         return t, reference.droplets(k)
-    t, path = _pick_snapshot(run, time, 0)
-    mesh = meshio.read(path)
-    points = np.asarray(mesh.points, dtype=float).reshape(-1, 3)
-    n = len(points)
-    data = mesh.point_data
-
-    def field(name, width=None):
-        if name not in data:
-            return np.full((n, width) if width else n, np.nan)
-        return np.asarray(data[name], dtype=float).reshape((n, width) if width else n)
-
-    velocity = field("velocity", 3)
-    frame = pd.DataFrame({"x": points[:, 0], "y": points[:, 1], "z": points[:, 2], "diameter": field("diameter"),
-                          "u": velocity[:, 0], "v": velocity[:, 1], "w": velocity[:, 2],
-                          "settling_velocity": -velocity[:, 2], "density": field("density"), "age": field("age")})
-    for optional in ("ident", "merged"):
-        if optional in data:
-            frame[optional] = field(optional)
-    return t, frame
+    t, path = pick_snapshot(run, time, 0)
+    return t, droplets_file(path)
 
 
 def read_slag(run, time=None) -> tuple[float, np.ndarray, np.ndarray]:
     """The slag grid of the snapshot nearest ``time`` [s] (None: the last): (its time [s], cell centres (n, 3) [m],
     cell velocity (n, 3) [m/s]). A cell's centre is the mean of its 8 corner points. Raises NoData if there is no
     such snapshot file or it holds no hexahedra with a velocity."""
-    import meshio
-
     reference = _reference(run)
     if reference is not None:  # a stored reference keeps the central x-z plane only
         k, t = _reference_snapshot(reference, time)
@@ -212,14 +124,9 @@ def read_slag(run, time=None) -> tuple[float, np.ndarray, np.ndarray]:
             raise NoData(f"the stored snapshot at t = {t:g} s has no slag plane")
         centres = np.column_stack([x, np.full(len(x), reference.slag_plane_y(k)), z]).astype(float)
         return t, centres, np.asarray(velocity, dtype=float).reshape(-1, 3)
-    t, path = _pick_snapshot(run, time, 1)
-    mesh = meshio.read(path)
-    cells = mesh.cells_dict.get("hexahedron")
-    velocity = mesh.cell_data_dict.get("velocity", {}).get("hexahedron")
-    if cells is None or velocity is None or len(cells) == 0:
-        raise NoData(f"{path.name}: no hexahedral cells with a velocity")
-    centres = np.asarray(mesh.points, dtype=float)[np.asarray(cells)].mean(axis=1)
-    return t, centres, np.asarray(velocity, dtype=float).reshape(-1, 3)
+    t, path = pick_snapshot(run, time, 1)
+    centres, velocity = slag_file(path)
+    return t, centres, velocity
 
 
 def _time_series(run) -> pd.DataFrame:
@@ -589,3 +496,53 @@ def render_all(run, out_dir, time=None) -> dict[str, Path | str]:
         atomic_write_bytes(path, buffer.getvalue())
         results[name] = path
     return results
+
+
+# ------------------------------------------------------------------------------------------------ command line
+def _finite_time(text):
+    """--time: a finite number of seconds (argparse refuses anything else with exit status 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a snapshot time in seconds") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a finite snapshot time in seconds")
+    return value
+
+
+def add_arguments(parser):
+    """The arguments of ``settler figures`` (registered in :data:`settler.cli.TOOLS`)."""
+    parser.add_argument("run", help="the output folder of a 'settler full' run (holding timeseries.csv and/or "
+                                    "snapshots.pvd)")
+    parser.add_argument("--out", metavar="DIR", default=None, help="folder to write the PNGs into (default: "
+                                                                  "RUN/figures; created if missing)")
+    parser.add_argument("--time", metavar="T", type=_finite_time, default=None,
+                        help="snapshot time [s] of the snapshot figures: the nearest snapshot is drawn (default: "
+                             "the last)")
+
+
+def main(args) -> int:
+    """``settler figures RUN [--out DIR] [--time T]``: every figure as a PNG; the exit status."""
+    from settler.output import OutputError, prepare_output_folder
+
+    try:
+        run = check_run(args.run)
+    except FileNotFoundError as exc:  # not a run: refused input (exit 2), not a failed run
+        raise OutputError(str(exc)) from None
+    # resume=True: only the checks (a file, not writable); the folder may hold anything, the run itself included
+    out = prepare_output_folder(args.out if args.out is not None else Path(run) / "figures", resume=True)
+    try:
+        times = [t for t, _, _ in snapshot_files(run)] if args.time is not None else []
+    except NoData:  # an unreadable snapshots.pvd: render_all says so for each snapshot figure
+        times = []
+    if times:
+        nearest = min(times, key=lambda t: (abs(t - args.time), -t))
+        if nearest != args.time:
+            print(f"snapshot figures at t = {nearest:g} s, the snapshot nearest --time {args.time:g}")
+    results = render_all(run, out, time=args.time)
+    width = max(len(name) for name in results)
+    for name, result in results.items():
+        print(f"{name:<{width}s}  {result}" if isinstance(result, Path) else f"{name:<{width}s}  skipped: {result}")
+    if not any(isinstance(result, Path) for result in results.values()):
+        raise OutputError(f"{run}: no figure could be drawn (reasons above)")
+    return 0

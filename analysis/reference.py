@@ -49,8 +49,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.runs import read_json
 from settler.output import read_channel_profile, read_time_series, to_json
+
+from .files import read_json
+
 
 #: Largest size [bytes] of one stored reference folder; above it fewer snapshots are kept (three cases must stay
 #: under 40 MB together, and no tracked file should exceed 5 MB: one snapshot of 146 000 droplets is 3.7 MB).
@@ -106,7 +108,7 @@ def choose_snapshots(times, count: int) -> list[int]:
 # ------------------------------------------------------------------------------------------------------- reading
 def _snapshot_list(run: Path):
     """(time [s], droplets path or None, fluid path or None) of the run's snapshots.pvd, by time."""
-    from analysis.figures import NoData, snapshot_files
+    from .files import NoData, snapshot_files
 
     try:
         return snapshot_files(run)

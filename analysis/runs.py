@@ -32,14 +32,16 @@ old run whose metadata.json does not list them).
 from __future__ import annotations
 
 import dataclasses
-import json
 import re
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from settler.output import OutputError, TIME_SERIES, atomic_write_bytes, read_channel_profile, read_time_series
+from settler.output import TIME_SERIES, OutputError, atomic_write_bytes, read_channel_profile, read_time_series
+
+from .files import read_json
+
 
 #: Engine names as ``metadata.json`` records them.
 FULL_ENGINE = "fulldem"
@@ -100,7 +102,7 @@ class Run:
         """Times [s] of the droplet snapshots a full run or reference holds (empty for popbal runs)."""
         if self.is_reference:
             return np.asarray(self._stored_reference().snapshot_times, dtype=float)
-        from analysis.figures import snapshot_files
+        from .files import snapshot_files
 
         return np.array([t for t, droplets, _ in snapshot_files(self.folder) if droplets is not None], dtype=float)
 
@@ -109,7 +111,8 @@ class Run:
         [m], diameter [m], u, v, w and settling_velocity [m/s], density [kg/m^3], age [s], merged [-]), as
         :func:`analysis.figures.read_droplets` reads them. Raises analysis.figures.NoData where there are none
         (popbal runs have none: use :meth:`distribution`)."""
-        from analysis.figures import NoData, read_droplets
+        from .figures import read_droplets
+        from .files import NoData
 
         self._need_snapshots(NoData)
         return read_droplets(self.folder, time)
@@ -118,7 +121,8 @@ class Run:
         """The slag of the snapshot nearest ``time`` [s] (None: the last): (its time [s], cell centres (n, 3) [m],
         velocity (n, 3) [m/s]); a reference keeps the central x-z plane only. See
         :func:`analysis.figures.read_slag`."""
-        from analysis.figures import NoData, read_slag
+        from .figures import read_slag
+        from .files import NoData
 
         self._need_snapshots(NoData)
         return read_slag(self.folder, time)
@@ -209,17 +213,6 @@ def load_run(folder) -> Run:
     return Run(folder=folder, engine=_engine(folder, metadata), timeseries=series,
                units=time_series_units(series_path, metadata), metadata=metadata, reference=reference,
                merges_by_size=optional["merges_by_size.csv"], channel_profile=optional["channel_profile.csv"])
-
-
-def read_json(path: Path, error=OutputError):
-    """The JSON document in ``path``, None if there is no such file; an unreadable one raises ``error`` (an
-    exception class) naming the file."""
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise error(f"{path}: cannot be read as JSON ({exc})") from None
 
 
 def _engine(folder: Path, metadata) -> str | None:

@@ -2,8 +2,9 @@
 
 Subcommands are listed in :data:`COMMANDS` (name -> (add_arguments, run, help)). The engines' commands live in the
 engines (``popbal/cli.py``, ``fulldem/cli.py``) and are named in :data:`ENGINES`; this shared layer imports an engine
-only when its command runs, so ``settler --version``, ``info`` and ``cases`` load neither. ``figures`` reads a run
-folder with :mod:`analysis.figures` (imported when it runs) and loads no engine either.
+only when its command runs, so ``settler --version``, ``info`` and ``cases`` load neither. The analysis commands
+(``figures``, ``compare``, ``calibrate``, ``sweep``, ``report``) are registered the same way, in :data:`TOOLS`, by the
+name of their module in ``analysis/``: the shared layer imports no analysis module either.
 """
 
 from __future__ import annotations
@@ -89,57 +90,6 @@ def _cases(args) -> int:
 
 
 # ------------------------------------------------------------------------------------------------------- figures
-def _finite_time(text):
-    """--time: a finite number of seconds (argparse refuses anything else with exit status 2)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a snapshot time in seconds") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise argparse.ArgumentTypeError(f"{text!r}: give a finite snapshot time in seconds")
-    return value
-
-
-def _figures_arguments(parser):
-    parser.add_argument("run", help="the output folder of a 'settler full' run (holding timeseries.csv and/or "
-                                    "snapshots.pvd)")
-    parser.add_argument("--out", metavar="DIR", default=None, help="folder to write the PNGs into (default: "
-                                                                  "RUN/figures; created if missing)")
-    parser.add_argument("--time", metavar="T", type=_finite_time, default=None,
-                        help="snapshot time [s] of the snapshot figures: the nearest snapshot is drawn (default: "
-                             "the last)")
-
-
-def _figures(args) -> int:
-    from pathlib import Path
-
-    from .output import prepare_output_folder
-
-    from analysis import figures  # matplotlib and meshio load only for this command
-
-    try:
-        run = figures.check_run(args.run)
-    except FileNotFoundError as exc:  # not a run: refused input (exit 2), not a failed run
-        raise OutputError(str(exc)) from None
-    # resume=True: only the checks (a file, not writable); the folder may hold anything, the run itself included
-    out = prepare_output_folder(args.out if args.out is not None else Path(run) / "figures", resume=True)
-    try:
-        times = [t for t, _, _ in figures.snapshot_files(run)] if args.time is not None else []
-    except figures.NoData:  # an unreadable snapshots.pvd: render_all says so for each snapshot figure
-        times = []
-    if times:
-        nearest = min(times, key=lambda t: (abs(t - args.time), -t))
-        if nearest != args.time:
-            print(f"snapshot figures at t = {nearest:g} s, the snapshot nearest --time {args.time:g}")
-    results = figures.render_all(run, out, time=args.time)
-    width = max(len(name) for name in results)
-    for name, result in results.items():
-        print(f"{name:<{width}s}  {result}" if isinstance(result, Path) else f"{name:<{width}s}  skipped: {result}")
-    if not any(isinstance(result, Path) for result in results.values()):
-        raise OutputError(f"{run}: no figure could be drawn (reasons above)")
-    return 0
-
-
 def warn_implausible(case, command):
     """Print the case's plausibility warnings (values far outside what the laws were made for) to stderr."""
     from .derived import plausibility_warnings
@@ -182,11 +132,11 @@ ENGINES = {"reduced": ("popbal.cli", "run the reduced population-balance model (
 TOOLS = {"compare": ("analysis.compare", "compare a full run with a reduced run column by column"),
          "calibrate": ("analysis.calibrate", "fit the reduced model's closures to the stored reference runs"),
          "sweep": ("analysis.sweep", "run the reduced model over a grid or a sampled design of case keys"),
-         "report": ("analysis.report", "execute a report notebook from reports/ and write it as .ipynb and HTML")}
+         "report": ("analysis.report", "execute a report notebook from reports/ and write it as .ipynb and HTML"),
+         "figures": ("analysis.figures", "draw the seed paper's figures from a run folder as PNGs")}
 COMMANDS = {
     "info": (_info_arguments, _info, "print a resolved case and its derived numbers"),
     "cases": (_cases_arguments, _cases, "list the case presets, or print the case-file reference"),
-    "figures": (_figures_arguments, _figures, "draw the seed paper's figures from a run folder as PNGs"),
     **{name: (*_engine(module), text) for name, (module, text) in ENGINES.items()},
     **{name: (*_tool(module), text) for name, (module, text) in TOOLS.items()},
 }

@@ -15,6 +15,7 @@ from analysis import figures
 from settler.cases import load_case
 from settler.output import time_series_frame, write_channel_profile, write_time_series
 
+
 ROOT = Path(__file__).resolve().parents[1]
 TIMES = (1.0, 2.0)
 N_DROPLETS = 40
@@ -39,7 +40,7 @@ def _write_droplets(path, points, data):
     if n:
         mesh = meshio.Mesh(points, [("vertex", np.arange(n).reshape(-1, 1))], point_data=data)
         meshio.write(path, mesh, file_format="vtu", binary=True, compression="zlib")
-    else:  # as the engine writes an empty snapshot (fulldem/io.py): zero points, one polygon of zero points
+    else:  # as the engine writes an empty snapshot (fulldem/io/): zero points, one polygon of zero points
         data = {k: np.zeros((0, 3) if k == "velocity" else 0) for k in data}
         mesh = meshio.Mesh(np.zeros((0, 3)), [("polygon", np.zeros((1, 0), dtype=np.int64))], point_data=data)
         meshio.write(path, mesh, file_format="vtu", binary=True, compression=None)
