@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from settler.physics import merged_diameter_v
+from settler.physics import merged_diameter_v, sphere_mass, sphere_volume
 
 
 #: Flag bit: the droplet is marked for coalescence with ``partner`` (they no longer repel each other).
@@ -284,7 +284,7 @@ class DropletStore:
 
     def volume(self) -> np.ndarray:
         """Volumes of the live droplets [m^3]."""
-        return np.pi / 6.0 * self.diameter[: self.count] ** 3
+        return sphere_volume(self.diameter[: self.count])
 
     def mass(self) -> np.ndarray:
         """Masses of the live droplets [kg]."""
@@ -318,7 +318,7 @@ def total_momentum(velocity, diameter, density, count):
     """Total momentum of droplets [kg m/s] (3,)."""
     out = np.zeros(3)
     for p in range(count):
-        m = density[p] * np.pi / 6.0 * diameter[p] ** 3
+        m = sphere_mass(diameter[p], density[p])
         for a in range(3):
             out[a] += m * velocity[p, a]
     return out

@@ -20,6 +20,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from settler.physics import sphere_volume
+
 
 class SectionGrid(NamedTuple):
     """Pivot grid in original droplet volume. K sections.
@@ -51,7 +53,7 @@ class SectionGrid(NamedTuple):
 
 def volume_of(diameter):
     """Sphere volume pi d^3 / 6 [m^3] of a diameter [m]."""
-    return math.pi / 6.0 * np.asarray(diameter, dtype=float) ** 3
+    return sphere_volume(np.asarray(diameter, dtype=float))
 
 
 def diameter_of(volume):

@@ -14,8 +14,8 @@ import numpy as np
 
 from .cases import Case
 from .physics import (DRAG_LAWS, PROBABILITY_FORMS, coalescence_probability, droplet_rate, mean_droplet_mass,
-                      relaxation_time, relative_diameter, reynolds_number, scale_factor_moment, stokes_velocity,
-                      table_droplet_rate, terminal_velocity, terminal_velocity_v, weber_number)
+                      relaxation_time, relative_diameter, reynolds_number, scale_factor_moment, sphere_mass,
+                      stokes_velocity, table_droplet_rate, terminal_velocity, terminal_velocity_v, weber_number)
 from .physics import matte_density as matte_density_law
 
 #: Richardson-Zaki exponent n (Richardson & Zaki 1954) used for the hindered estimate.
@@ -120,7 +120,7 @@ def _derived_numbers(case: Case) -> dict[str, list[Quantity]]:
     ]
 
     summary = feed_summary(case)
-    nominal = f.mass_rate / (rho_p * math.pi / 6.0 * summary.mean_diameter**3)
+    nominal = f.mass_rate / sphere_mass(summary.mean_diameter, rho_p)
     groups["feed"] = [
         Quantity("droplets fed per second", summary.rate, "1/s",
                  "matte rate / mean droplet mass over the feed distribution"),

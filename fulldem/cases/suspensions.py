@@ -20,7 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from settler.cases import load_case
-from settler.physics import STANDARD_GRAVITY, richardson_zaki_factor
+from settler.physics import STANDARD_GRAVITY, richardson_zaki_factor, sphere_volume
 
 from ..droplets import DropletStore
 from ..fluid.solver import total_momentum
@@ -86,7 +86,7 @@ def hindered_suspension(phi, *, diameter=2e-3, cell=6e-3, width=0.036, height=0.
     3150 kg/m^3, 0.45 Pa s) filling the box from the floor to ``fill`` [m]; box width x width x height [m], periodic
     in x and y, walls in z; droplets touching the floor are removed as settled. Returns the Simulation."""
     case = load_case("simple", point_like_overrides(diameter, cell, fluid_step, extra))
-    count = int(round(phi * width * width * fill / (math.pi / 6.0 * diameter**3)))
+    count = int(round(phi * width * width * fill / sphere_volume(diameter)))
     positions = random_suspension(np.random.default_rng(seed), count, (0.0, 0.0, 0.0), (width, width, fill),
                                   diameter)
     store = DropletStore(count)
@@ -99,7 +99,7 @@ def homogeneous_suspension(phi, *, diameter=2e-3, cell=6e-3, size=0.048, fluid_s
     """The same droplets filling a fully periodic cube of side ``size`` [m] at volume fraction ``phi``; a uniform
     upward body force (the mean pressure gradient) carries their total buoyant weight. Returns the Simulation."""
     case = load_case("simple", point_like_overrides(diameter, cell, fluid_step, extra))
-    count = int(round(phi * size**3 / (math.pi / 6.0 * diameter**3)))
+    count = int(round(phi * size**3 / sphere_volume(diameter)))
     positions = random_periodic_suspension(np.random.default_rng(seed), count, (size,) * 3, diameter)
     store = DropletStore(count)
     store.add(positions, diameter, case.matte.density)
@@ -115,7 +115,7 @@ def batch_settling_speed(sim):
     In a periodic box the frame moves: the drag reaction is owed one step, so the total momentum (zero) includes
     that impulse in transit and fluid and droplets drift upward together; only their difference is physical."""
     store, n = sim.store, sim.store.count
-    droplet_volume = float(np.sum(math.pi / 6.0 * store.diameter[:n] ** 3))
+    droplet_volume = float(np.sum(sphere_volume(store.diameter[:n])))
     box_volume = float(np.prod(sim.grid.size))
     fluid_momentum = total_momentum(sim.grid, sim.fluid, sim.density, sim.momentum_eps)[2]
     fluid_velocity = fluid_momentum / (sim.density * (box_volume - droplet_volume))

@@ -5,10 +5,10 @@ owed to the fluid (the step's order: :mod:`fulldem.stepper`).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit, prange
+
+from settler.physics import sphere_volume
 
 
 #: Quantities deposited at x^n before the fluid step, by array: volume on the three face arrays and the cells, then
@@ -24,7 +24,7 @@ def start_rows(position, diameter, velocity, count, inv_cell_volume, start_posit
     """Per droplet at x^n: start_position = position [m], volume [m^3], and the deposit rows (DEPOSIT_COMPONENTS):
     volume / cell volume on the three face arrays and the cells, times the velocity for the flux rows."""
     for p in prange(count):
-        vol = math.pi / 6.0 * diameter[p] ** 3
+        vol = sphere_volume(diameter[p])
         volume[p] = vol
         share = vol * inv_cell_volume
         for r in range(4):

@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from settler.output import MID_BAND, band_edges, half_volume_radius
+from settler.physics import sphere_volume
 
 
 def face_value(grid, field, axis, point) -> float:
@@ -50,7 +51,7 @@ def measures(sim, z_low, z_high, z_axis):
     z = s.position[:n, 2] - sim.lower[2]
     inside = (z >= z_low) & (z < z_high)
     r = np.hypot(s.position[:n, 0][inside] - x0, s.position[:n, 1][inside] - y0)
-    volume = math.pi / 6.0 * s.diameter[:n][inside] ** 3
+    volume = sphere_volume(s.diameter[:n][inside])
     point = (x0, y0, sim.lower[2] + z_axis)
     return half_volume_radius(r, volume), -face_value(sim.grid, sim.fluid.w, 2, point), float(volume.sum())
 

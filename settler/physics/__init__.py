@@ -35,6 +35,7 @@ from .settling import (DRAG_LAWS, DRAG_SCHILLER_NAUMANN, DRAG_STOKES, HINDRANCE,
                        schiller_naumann_factor, schiller_naumann_velocity, square_duct_factor, stokes_velocity,
                        terminal_velocity)
 from .slag import slag_viscosity
+from .sphere import sphere_mass, sphere_volume
 
 
 def vectorize(law):

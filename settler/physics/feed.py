@@ -4,10 +4,11 @@ Diameters are d = d_mean * s with the scale factor s ~ Normal(1, std) truncated 
 Table 3: d_mean = 500 um, std = 0.1, range 0.35-0.65 mm, i.e. s in [0.7, 1.3]).
 """
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .sphere import sphere_mass
 
 
 def _truncated_normal(std, scale_min, scale_max):
@@ -40,7 +41,7 @@ def scale_factor_pdf(s, std=0.1, scale_min=0.7, scale_max=1.3):
 
 def mean_droplet_mass(mean_diameter, density, std=0.1, scale_min=0.7, scale_max=1.3):
     """Mean mass of a fed droplet, rho pi/6 d_mean^3 E[s^3] [kg]."""
-    return density * math.pi / 6.0 * mean_diameter**3 * scale_factor_moment(3, std, scale_min, scale_max)
+    return sphere_mass(mean_diameter, density) * scale_factor_moment(3, std, scale_min, scale_max)
 
 
 def droplet_rate(mass_rate, mean_diameter, density, std=0.1, scale_min=0.7, scale_max=1.3):
@@ -55,7 +56,7 @@ def table_droplet_rate(mass_rate, diameters, mass_fractions, density):
     """
     d = np.asarray(diameters, dtype=float)
     w = np.asarray(mass_fractions, dtype=float)
-    return float(np.sum(mass_rate * w / (density * math.pi / 6.0 * d**3)))
+    return float(np.sum(mass_rate * w / sphere_mass(d, density)))
 
 
 @dataclass
@@ -101,7 +102,7 @@ class FeedSchedule:
         while True:
             if self._pending.size == 0:
                 self._refill()
-            masses = self.density * math.pi / 6.0 * self._pending**3
+            masses = sphere_mass(self._pending, self.density)
             fed_after = self.fed_mass + np.cumsum(masses)
             # droplet k is released when the mass before it plus half of it is due
             due = fed_after - 0.5 * masses <= target

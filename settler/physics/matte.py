@@ -14,6 +14,8 @@ import math
 from numba import njit
 
 from .constants import MOLAR_MASS_CU2S, MOLAR_MASS_FES
+from .sphere import sphere_mass
+
 
 #: Coefficients of Eq. 4, rho [g/cm^3] = a + b X (Sundstrom et al., J. SAIMM 108 (2008) 431).
 DENSITY_INTERCEPT = 3.9732
@@ -61,7 +63,7 @@ def composition_from_masses(mass_cu2s, mass_fes):
 @njit(cache=True)
 def species_masses(diameter, x_cu2s):
     """Cu2S and FeS masses [kg] of a droplet of the given diameter [m] and composition X (tuple)."""
-    mass = matte_density(x_cu2s) * math.pi / 6.0 * diameter**3
+    mass = sphere_mass(diameter, matte_density(x_cu2s))
     w = cu2s_mass_fraction(x_cu2s)
     return w * mass, (1.0 - w) * mass
 
