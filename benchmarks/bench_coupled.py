@@ -80,7 +80,7 @@ def bench(n, steps, overrides):
     count = sim.store.count
     dem_steps = steps * sim.substeps
     return {
-        "n": n, "remaining": count, "substeps": sim.substeps, "dem_step": sim.h, "fluid_step": sim.dt,
+        "n": n, "remaining": count, "substeps": sim.substeps, "dem_step": sim.dem_step, "fluid_step": sim.dt,
         "loop": loop, "setup": setup,
         "throughput": count * dem_steps / loop,
         "wall_per_sim_second": loop / (steps * sim.dt),

@@ -62,7 +62,7 @@ SKIN = 0.25 * DIAMETER
 STEPS = 2000
 
 
-def run_dem(store, steps, h, box_size, stiffness_ref, diameter_ref, restitution, wall_restitution, skin,
+def run_dem(store, steps, dem_step, box_size, stiffness_ref, diameter_ref, restitution, wall_restitution, skin,
             body_acceleration, viscosity, report_steps=(), half_list=True, track_impulse=True):
     """DEM-only run in a closed box with all six walls and linear Stokes drag beta = 3 pi mu d in still fluid.
 
@@ -70,7 +70,7 @@ def run_dem(store, steps, h, box_size, stiffness_ref, diameter_ref, restitution,
     (list builds during the loop), ``kinetic_energy`` {step: J} at ``report_steps``, ``max_overlap_ratio``,
     ``impulse`` (the drag impulses, (n, 3) [N s], if tracked) and the ``stepper``.
     """
-    stepper = dem_stepper.DemStepper(store, (0.0, 0.0, 0.0), box_size, (False, False, False), h, stiffness_ref,
+    stepper = dem_stepper.DemStepper(store, (0.0, 0.0, 0.0), box_size, (False, False, False), dem_step, stiffness_ref,
                              diameter_ref, restitution, skin, body_acceleration, wall_restitution=wall_restitution,
                              half_list=half_list)
     stepper.droplets_changed()

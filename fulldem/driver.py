@@ -387,7 +387,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
         log(f"settler full: note: the {' and '.join(missing)} submodel(s) are not in the engine yet; this run has "
             f"none ({', '.join(m + '.enabled' for m in missing)} ignored)")
     startup = {"grid_shape": list(sim.grid.shape), "cell_size": sim.grid.spacing, "fluid_step": sim.dt,
-               "dem_step": sim.h, "dem_substeps": sim.substeps, "contact_stiffness_ref": sim.stiffness_ref,
+               "dem_step": sim.dem_step, "dem_substeps": sim.substeps, "contact_stiffness_ref": sim.stiffness_ref,
                "slag_viscosity": sim.viscosity, "submodels": [m.name for m in sim.submodels],
                "submodels_missing": missing,
                "numba_threads": numba.get_num_threads(), "numba_threading_layer": _threading_layer(),
@@ -395,7 +395,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
                "feed_on": bool(sim.feed_on), "command": command}
     write_run_metadata(out, case, "fulldem", **startup)
     log(f"fulldem: grid {sim.grid.shape} of {sim.grid.spacing * 1e3:g} mm, fluid step {sim.dt:g} s, "
-        f"DEM step {sim.h:.3g} s ({sim.substeps} per fluid step), contact stiffness {sim.stiffness_ref:.3g} N/m")
+        f"DEM step {sim.dem_step:.3g} s ({sim.substeps} per fluid step), contact stiffness {sim.stiffness_ref:.3g} N/m")
 
     wall_start = _time.perf_counter()
 

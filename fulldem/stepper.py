@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from settler.derived import settling_velocity
-from settler.physics import DRAG_LAWS, HINDRANCE, STANDARD_GRAVITY, FeedSchedule
+from settler.physics import DRAG_LAWS, HINDRANCE, STANDARD_GRAVITY, FeedSchedule, sphere_mass, sphere_volume
 
 from .boundaries import boundaries_for
 from .coupling import filtered, mobility, smoothing
@@ -159,15 +159,15 @@ class Simulation:
         self.stiffness_ref = stiffness_for_overlap(fd.max_overlap, d_ref, excess, fd.load_factor,
                                                    STANDARD_GRAVITY)
         d_min = f.mean_diameter * f.scale_min
-        m_min = case.matte.density * math.pi / 6.0 * d_min**3
+        m_min = sphere_mass(d_min, case.matte.density)
         k_min = self.stiffness_ref * (d_min / d_ref) ** 2
         self.contact_step = stable_step(k_min, effective_mass(m_min, m_min), fd.contact_steps)
         dem_step = fd.dem_step if fd.dem_step > 0.0 else self.contact_step
         self.substeps = max(1, math.ceil(fd.fluid_step / dem_step - 1e-9))
         self.dt = fd.fluid_step
-        self.h = self.dt / self.substeps
+        self.dem_step = self.dt / self.substeps
         self.d_ref = d_ref
-        self.dem = DemStepper(self.store, self.lower, self.grid.size, self.periodic, self.h, self.stiffness_ref,
+        self.dem = DemStepper(self.store, self.lower, self.grid.size, self.periodic, self.dem_step, self.stiffness_ref,
                               d_ref, fd.restitution, SKIN_MIN * d_ref, np.zeros(3),
                               absorbing_bottom=self.bounds.absorbing_bottom, outlet=self.bounds.contact_outlet(),
                               sort_on_rebuild=False, record_first_contacts=case.coalescence.enabled)
@@ -312,7 +312,7 @@ class Simulation:
         """Void fraction on faces (3 arrays) and at cells from the droplets' current positions [-]."""
         s, n = self.store, self.store.count
         volume = self.per_droplet
-        volume[:n] = math.pi / 6.0 * s.diameter[:n] ** 3 / self.grid.cell_volume
+        volume[:n] = sphere_volume(s.diameter[:n]) / self.grid.cell_volume
         faces = [1.0 - self.deposit(s.position, volume, a, np.zeros(self.grid.face_shape(a))) for a in range(3)]
         cells = 1.0 - self.deposit(s.position, volume, 3, self.grid.zeros_cells())
         return faces, cells
@@ -321,7 +321,7 @@ class Simulation:
         s, n = self.store, self.store.count
         out = []
         for a in range(3):
-            values = math.pi / 6.0 * s.diameter[:n] ** 3 * s.velocity[:n, a] / self.grid.cell_volume
+            values = sphere_volume(s.diameter[:n]) * s.velocity[:n, a] / self.grid.cell_volume
             buf = np.zeros(s.capacity)
             buf[:n] = values
             out.append(self.deposit(s.position, buf, a, np.zeros(self.grid.face_shape(a))))
@@ -355,7 +355,7 @@ class Simulation:
         velocity = np.zeros((len(d), 3))
         velocity[:, 2] = -self.terminal_velocity(d)  # fed at their own terminal velocity
         self.store.add(positions, d, rho, velocity=velocity)
-        self.counters.mass_fed += float(np.sum(rho * math.pi / 6.0 * d**3))
+        self.counters.mass_fed += float(np.sum(sphere_mass(d, rho)))
         self.counters.fed += len(d)
         self._ensure_capacity()  # the DEM sees the store's new version and rebuilds once, at the next step
         return len(d)
@@ -369,7 +369,7 @@ class Simulation:
         if leaving == 0:
             return
         code = self.exit_code[:n]
-        mass = s.density[:n] * math.pi / 6.0 * s.diameter[:n] ** 3
+        mass = sphere_mass(s.diameter[:n], s.density[:n])
         self.counters.mass_settled += float(mass[code == 1].sum())
         self.counters.mass_lost += float(mass[code == 2].sum())
         self.counters.settled += int((code == 1).sum())
@@ -446,7 +446,7 @@ class Simulation:
         self.dem.advance(self.substeps, self.drift_velocity, self.impulse)
         worst = max(at_start, self.dem.peak_overlap_ratio)
         # ... and the fluid is owed -J, deposited where the droplets felt the fluid
-        owed_rows(self.impulse, self.external, self.substeps * self.h, n, -inv_cell_volume / self.dt, values)
+        owed_rows(self.impulse, self.external, self.substeps * self.dem_step, n, -inv_cell_volume / self.dt, values)
         if s.version != deposited_version:
             raise RuntimeError("stepper: droplets were added, removed or reordered between the step's deposits; the "
                                "droplet set may change only at the step's event points (see the module docstring)")
@@ -502,7 +502,7 @@ class Simulation:
     def momentum(self):
         """Total momentum [kg m/s]: fluid (with the void fraction of its last step) + droplets + impulse owed."""
         s, n = self.store, self.store.count
-        mass = s.density[:n] * math.pi / 6.0 * s.diameter[:n] ** 3
+        mass = sphere_mass(s.diameter[:n], s.density[:n])
         droplets = (mass[:, None] * s.velocity[:n]).sum(axis=0)
         fluid = solver.total_momentum(self.grid, self.fluid, self.density, getattr(self, "momentum_eps", None))
         owed = np.array([float(np.sum(self.owed_force[a][solver._unique_faces(self.grid, a)])) for a in range(3)])
@@ -514,7 +514,7 @@ class Simulation:
 
     def mass_in_slag(self):
         s, n = self.store, self.store.count
-        return float(np.sum(s.density[:n] * math.pi / 6.0 * s.diameter[:n] ** 3))
+        return float(np.sum(sphere_mass(s.diameter[:n], s.density[:n])))
 
     def terminal_velocity(self, diameter):
         """Single-droplet terminal velocity in the case's slag, drag law and fluid-drop switch [m/s] (positive

@@ -608,14 +608,14 @@ def test_drag_impulse_bookkeeping_with_contacts_and_walls():
         impulse = np.zeros((n, 3))
         stepper.step(fluid, impulse)
         a1 = stepper.force[:n] / mass + stepper.body_acceleration
-        expected = mass * (store.velocity[:n] - v0) - mass * stepper.h * 0.5 * (a0 + a1)
-        scale = np.abs(mass * v0).max() + np.abs(mass * a0 * stepper.h).max()
+        expected = mass * (store.velocity[:n] - v0) - mass * stepper.dem_step * 0.5 * (a0 + a1)
+        scale = np.abs(mass * v0).max() + np.abs(mass * a0 * stepper.dem_step).max()
         np.testing.assert_allclose(impulse, expected, rtol=0, atol=1e-13 * scale)
         # momentum: what the droplets gained beyond body forces and walls is what the drag gave them
         wall_force = stepper.force[:n].sum(axis=0)  # contact forces sum to zero; the rest is walls
         gained = (mass * (store.velocity[:n] - v0)).sum(axis=0)
-        assert np.abs(gained - impulse.sum(axis=0) - stepper.h * (mass * stepper.body_acceleration).sum(axis=0)
-                      ).max() < 1e-3 * scale + np.abs(wall_force).max() * stepper.h
+        assert np.abs(gained - impulse.sum(axis=0) - stepper.dem_step * (mass * stepper.body_acceleration).sum(axis=0)
+                      ).max() < 1e-3 * scale + np.abs(wall_force).max() * stepper.dem_step
 
 
 def test_dense_settling_pile_overlap_stays_below_two_percent():

@@ -34,7 +34,7 @@ def test_terminal_velocity_with_dem_step_ten_relaxation_times():
     """The exponential drag integrator is exact for any step: DEM step = 10 tau_p gives the same terminal velocity."""
     tau = relaxation_time(500e-6, 5100.0, 0.45)
     sim, v = _single_droplet(500e-6, (0.2, 0.2, 0.2), 0.01, 20 * tau, 0.6, [f"fulldem.dem_step={10 * tau}"])
-    assert sim.h == pytest.approx(10 * tau, rel=1e-12)
+    assert sim.dem_step == pytest.approx(10 * tau, rel=1e-12)
     expected = sim.terminal_velocity(500e-6) * square_duct_factor(500e-6 / 0.2)
     assert v == pytest.approx(expected, rel=0.02)
 

@@ -1,8 +1,8 @@
 """Fluid-droplet force laws lifted onto all droplets: drag coefficient with Reynolds and void-fraction corrections.
 
 The coupling is the volume-averaged *model A* ("set I" of Zhou, Kuang, Chu & Yu, J. Fluid Mech. 661 (2010) 482),
-as in :mod:`fulldem.fluid.solver`: the fluid feels -eps grad p, a droplet feels its buoyant weight (rho_p - rho_f) V g, the
-pressure-gradient force -V grad p (dynamic pressure) and the drag beta (u - v), with Di Felice's voidage function
+as in :mod:`fulldem.fluid.solver`: the fluid feels -eps grad p, a droplet feels its buoyant weight (rho_p - rho_f) V g,
+the pressure-gradient force -V grad p (dynamic pressure) and the drag beta (u - v), with Di Felice's voidage function
 
     beta = 3 pi mu d f(Re) eps^(1 - chi(Re)),  Re = rho eps |u - v| d / mu
 
@@ -64,9 +64,9 @@ def drag_coefficients(diameter, velocity, fluid_velocity, eps, count, density_fl
         beta = drag_coefficient(diameter[p], slip, eps[p], density_fluid, viscosity, law, hindrance,
                                 viscosity_ratio)
         if self_correction:
-            sigma = max(sigma_cells * spacing, sigma_diameter * diameter[p])
-            re_sigma = density_fluid * slip * sigma / viscosity
-            x = math.log10(max(re_sigma, 10.0 ** oseen_logs[0]))
+            smoothing_width = max(sigma_cells * spacing, sigma_diameter * diameter[p])
+            re_width = density_fluid * slip * smoothing_width / viscosity
+            x = math.log10(max(re_width, 10.0 ** oseen_logs[0]))
             n = oseen_logs.shape[0]
             if x >= oseen_logs[n - 1]:
                 oseen = oseen_values[n - 1] * 10.0 ** (oseen_logs[n - 1] - x)
@@ -75,7 +75,7 @@ def drag_coefficients(diameter, velocity, fluid_velocity, eps, count, density_fl
                 i = min(int((x - oseen_logs[0]) / step), n - 2)
                 t = (x - oseen_logs[i]) / step
                 oseen = (1.0 - t) * oseen_values[i] + t * oseen_values[i + 1]
-            ratio = sigma / spacing
+            ratio = smoothing_width / spacing
             m = mobility_ratios.shape[0]
             if ratio <= mobility_ratios[0]:
                 discrete = mobility_factors[0]
@@ -87,6 +87,6 @@ def drag_coefficients(diameter, velocity, fluid_velocity, eps, count, density_fl
                     j += 1
                 u = (ratio - mobility_ratios[j]) / (mobility_ratios[j + 1] - mobility_ratios[j])
                 discrete = (1.0 - u) * mobility_factors[j] + u * mobility_factors[j + 1]
-            m_self = discrete * oseen / (6.0 * math.pi**1.5 * viscosity * sigma)
+            m_self = discrete * oseen / (6.0 * math.pi**1.5 * viscosity * smoothing_width)
             beta = beta / (1.0 - min(beta * m_self, SELF_CORRECTION_CAP))
         out[p] = beta

@@ -46,10 +46,10 @@ def _stokes_transfer(n, h, mu):
 
 
 @njit(cache=True)
-def gaussian_self_mobility(sigma, viscosity):
+def gaussian_self_mobility(smoothing_width, viscosity):
     """Self-mobility of a Gaussian-regularised Stokeslet averaged with the same Gaussian, 1/(6 pi^1.5 mu sigma)
     [m/(N s)] (Maxey & Patel 2001: a Gaussian of width sigma = a / sqrt(pi) reproduces Stokes drag on radius a)."""
-    return 1.0 / (6.0 * math.pi**1.5 * viscosity * sigma)
+    return 1.0 / (6.0 * math.pi**1.5 * viscosity * smoothing_width)
 
 
 def _oseen_inner(s, re):
@@ -76,7 +76,7 @@ def oseen_table():
     return logs, factors
 
 
-def oseen_factor(re_sigma):
+def oseen_factor(re_width):
     """u_self(Re)/u_self(0) for a Gaussian-regularised Oseenlet along the slip direction [-].
 
     u_self(Re) / u_self(0) = I(Re) / I(0), I(Re) = int_0^inf ds int_-1^1 dc exp(-s^2)(1 - c^2) s^2/(s^2 + Re^2 c^2),
@@ -84,7 +84,7 @@ def oseen_factor(re_sigma):
     docstring's references' manner). 1 at Re = 0, falling like 1/Re for large Re.
     """
     logs, factors = oseen_table()
-    x = np.log10(np.maximum(np.asarray(re_sigma, dtype=float), 10.0 ** logs[0]))
+    x = np.log10(np.maximum(np.asarray(re_width, dtype=float), 10.0 ** logs[0]))
     inside = np.interp(np.minimum(x, logs[-1]), logs, factors)
     return np.where(x > logs[-1], factors[-1] * 10.0 ** (logs[-1] - x), inside)
 
@@ -104,7 +104,7 @@ def discrete_mobility_factor(sigma_cells_ratio: float, cut: float = DEFAULT_CUT,
     lower = np.zeros(3)
     transfer = _stokes_transfer(n, h, mu)
     rng = np.random.default_rng(12345)
-    sigma = sigma_cells_ratio * h
+    smoothing_width = sigma_cells_ratio * h
     values = []
     for _ in range(samples):
         pos = np.array([[n / 2 + rng.uniform(0, 1), n / 2 + rng.uniform(0, 1), n / 2 + rng.uniform(0, 1)]])
@@ -119,14 +119,14 @@ def discrete_mobility_factor(sigma_cells_ratio: float, cut: float = DEFAULT_CUT,
         values.append(out[0])
     periodic_mobility = float(np.mean(values))
     unbounded = periodic_mobility + HASIMOTO / (6.0 * math.pi * mu * n * h)
-    return unbounded / gaussian_self_mobility(sigma, mu)
+    return unbounded / gaussian_self_mobility(smoothing_width, mu)
 
 
 @njit(cache=True)
-def corrected_drag_coefficient(beta, sigma, viscosity, discrete_factor, oseen):
+def corrected_drag_coefficient(beta, smoothing_width, viscosity, discrete_factor, oseen):
     """beta / (1 - beta M_self): the drag coefficient to use with the interpolated (disturbed) fluid velocity [kg/s].
 
     M_self = discrete_factor * oseen / (6 pi^1.5 mu sigma) is the droplet's own self-mobility on the grid.
     """
-    m_self = discrete_factor * oseen * gaussian_self_mobility(sigma, viscosity)
+    m_self = discrete_factor * oseen * gaussian_self_mobility(smoothing_width, viscosity)
     return beta / (1.0 - min(beta * m_self, SELF_CORRECTION_CAP))

@@ -2,7 +2,7 @@
 the trilinear weights the filtered kernel starts from).
 
 **Kernel.** A droplet's volume, volume flux and drag reaction are spread over the grid with a truncated, discretely
-normalised Gaussian of width ``sigma = max(sigma_cells * h, sigma_diameter * d)``: droplets larger than a cell
+normalised Gaussian of width sigma = max(sigma_cells h, sigma_diameter d) (``smoothing_width`` in the code): droplets larger than a cell
 (coalesced droplets reach 2 mm in cubic, 40 mm in deep) spread over as many cells as their size needs. The weights
 are separable, ``w = w_x w_y w_z``, and sum to one over the nodes of each staggered array, so deposition conserves
 what it spreads exactly. Wall-normal boundary faces (whose velocity is imposed) receive nothing; periodic axes wrap.
@@ -45,7 +45,8 @@ def kernel_width(diameter, spacing, sigma_cells, sigma_diameter):
 
 
 @njit(cache=True)
-def weights_1d(x, lower, spacing, n_cells, staggered, wall_normal, periodic, sigma, cut, index_out, weight_out):
+def weights_1d(x, lower, spacing, n_cells, staggered, wall_normal, periodic, smoothing_width, cut, index_out,
+               weight_out):
     """Normalised 1-D Gaussian weights of the nodes near coordinate x; returns the number of nodes written.
 
     Nodes are cell centres (staggered = False) or faces (staggered = True) of an axis with n_cells cells.
@@ -54,7 +55,7 @@ def weights_1d(x, lower, spacing, n_cells, staggered, wall_normal, periodic, sig
     """
     offset = 0.0 if staggered else 0.5
     s = (x - lower) / spacing - offset  # position in node units
-    reach = cut * sigma / spacing
+    reach = cut * smoothing_width / spacing
     first = int(math.ceil(s - reach))
     last = int(math.floor(s + reach))
     if last - first + 1 > index_out.shape[0]:
@@ -70,12 +71,12 @@ def weights_1d(x, lower, spacing, n_cells, staggered, wall_normal, periodic, sig
             low, high = 1, n_nodes - 2
     count = 0
     total = 0.0
-    inv = 1.0 / (2.0 * (sigma / spacing) ** 2)
+    inv = 1.0 / (2.0 * (smoothing_width / spacing) ** 2)
     # exp(-r^2 inv) at consecutive nodes r, r + 1, ... by the recurrence w <- w g, g <- g q (g = exp(-(2r + 1) inv),
     # q = exp(-2 inv)): three exps per axis instead of one per node. g grows like exp(2 reach inv) = exp(cut h/sigma)
     # at most, far from overflow for any kernel wider than a hundredth of a cell; narrower ones take exps per node.
     r = first - s
-    recurrence = cut * spacing < 100.0 * sigma
+    recurrence = cut * spacing < 100.0 * smoothing_width
     w = math.exp(-r * r * inv)
     g = math.exp(-(2.0 * r + 1.0) * inv) if recurrence else 0.0
     q = math.exp(-2.0 * inv) if recurrence else 0.0
@@ -103,7 +104,7 @@ def weights_1d(x, lower, spacing, n_cells, staggered, wall_normal, periodic, sig
 
 
 @njit(cache=True)
-def stencils(position, sigma, spacing, lower, shape, periodic, cut, idx, wts, counts):
+def stencils(position, smoothing_width, spacing, lower, shape, periodic, cut, idx, wts, counts):
     """Both 1-D weight sets of one droplet along each axis: ``[0, axis]`` at cell centres (cells, and the faces of
     the two other components), ``[1, axis]`` at the faces normal to that axis (the faces of component ``axis``).
 
@@ -112,9 +113,9 @@ def stencils(position, sigma, spacing, lower, shape, periodic, cut, idx, wts, co
     """
     for axis in range(3):
         counts[0, axis] = weights_1d(position[axis], lower[axis], spacing, shape[axis], False, False,
-                                     periodic[axis], sigma, cut, idx[0, axis], wts[0, axis])
+                                     periodic[axis], smoothing_width, cut, idx[0, axis], wts[0, axis])
         counts[1, axis] = weights_1d(position[axis], lower[axis], spacing, shape[axis], True, not periodic[axis],
-                                     periodic[axis], sigma, cut, idx[1, axis], wts[1, axis])
+                                     periodic[axis], smoothing_width, cut, idx[1, axis], wts[1, axis])
 
 
 #: Stencil-table modes of :func:`deposit_many` / :func:`interpolate_many`: compute the weights (no table), compute
@@ -159,8 +160,8 @@ def droplet_stencils(p, position, diameter, spacing, lower, shape, periodic, sig
                     idx[st, axis, i] = node
                     wts[st, axis, i] = table_weights[p, st, axis, i]
         return
-    sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
-    stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+    smoothing_width = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
+    stencils(position[p], smoothing_width, spacing, lower, shape, periodic, cut, idx, wts, counts)
     if mode == STORE:
         width = table_weights.shape[3]
         fits = True
@@ -444,8 +445,8 @@ def self_weight(position, diameter, count, component, out, spacing, lower, shape
         wts = np.empty((2, 3, MAX_STENCIL))
         counts = np.empty((2, 3), dtype=np.int64)
         for p in range(chunk * count // n_chunks, (chunk + 1) * count // n_chunks):
-            sigma = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
-            stencils(position[p], sigma, spacing, lower, shape, periodic, cut, idx, wts, counts)
+            smoothing_width = kernel_width(diameter[p], spacing, sigma_cells, sigma_diameter)
+            stencils(position[p], smoothing_width, spacing, lower, shape, periodic, cut, idx, wts, counts)
             out[p] = _sum_of_squares(wts, counts, component)
 
 

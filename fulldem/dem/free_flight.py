@@ -64,7 +64,7 @@ def free_flight_candidates(position, velocity, force, b, count, w, m, rate, dura
     """
     diameter, mass, flags, partner = b
     _, wall_lower, wall_upper, _, _, _, _, _ = w
-    drag, fluid_velocity, body_acceleration, h, impulse, deviation = m
+    drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     farthest = np.zeros(nchunk)
     for ch in prange(nchunk):

@@ -1,5 +1,7 @@
 """The exponential velocity-Verlet integrator of the DEM sub-steps, alone and fused with the contact loops.
 
+Symbols: h is the DEM step (``dem_step`` in the code, Delta t_DEM in docs/glossary.md).
+
 Equation of motion of droplet p (mass m [kg], drag coefficient beta [kg/s], fluid velocity u [m/s] at the droplet,
 both frozen over a step):
 
@@ -50,31 +52,31 @@ _SERIES_LIMIT = 0.5
 
 
 @njit(cache=True, inline="always")
-def drag_factors(rate, h):
-    """(E, phi1, phi2) of the exponential step for drag rate 1/tau = beta/m [1/s] and step h [s].
+def drag_factors(rate, dem_step):
+    """(E, phi1, phi2) of the exponential step for drag rate 1/tau = beta/m [1/s] and DEM step h = ``dem_step`` [s].
 
     E = exp(-h/tau) [-], phi1 = tau (1 - E) [s], phi2 = tau (h - phi1) [s^2]; rate = 0 gives (1, h, h^2/2).
     """
-    z = rate * h
+    z = rate * dem_step
     if z < _SERIES_LIMIT:
         p2 = 0.0
         for k in range(15, -1, -1):
             p2 = p2 * (-z) + _SERIES[k]
         p1 = 1.0 - z * p2
-        return 1.0 - z * p1, p1 * h, p2 * h * h
+        return 1.0 - z * p1, p1 * dem_step, p2 * dem_step * dem_step
     e = math.exp(-z)
     p1 = (1.0 - e) / z
-    return e, p1 * h, (1.0 - p1) / z * h * h
+    return e, p1 * dem_step, (1.0 - p1) / z * dem_step * dem_step
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def drag_factors_into(mass, beta, h, count, drag):
+def drag_factors_into(mass, beta, dem_step, count, drag):
     """drag[p] = (E, phi1, phi2) of :func:`drag_factors` for drag coefficient beta (cap,) [kg/s] and mass [kg].
 
     Computed when beta, the masses or h change (the coupling's drag update), not every step.
     """
     for p in prange(count):
-        e, phi1, phi2 = drag_factors(beta[p] / mass[p], h)
+        e, phi1, phi2 = drag_factors(beta[p] / mass[p], dem_step)
         drag[p, 0] = e
         drag[p, 1] = phi1
         drag[p, 2] = phi2
@@ -89,10 +91,10 @@ def integrate_initial(position, velocity, force, mass, m, count, nchunk):
     module docstring). Returns the largest displacement of a droplet in this step [m] (the neighbour list's cheap
     validity bound). Next: forces at the new positions, then :func:`integrate_final` with the same ``m``.
     """
-    drag, fluid_velocity, body_acceleration, h, impulse, deviation = m
+    drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
-    half_h = 0.5 * h
+    half_step = 0.5 * dem_step
     worst = np.zeros(nchunk)
     for ch in prange(nchunk):
         local = 0.0
@@ -100,19 +102,19 @@ def integrate_initial(position, velocity, force, mass, m, count, nchunk):
             mp = mass[p]
             inv_m = 1.0 / mp
             e, phi1, phi2 = drag[p, 0], drag[p, 1], drag[p, 2]
-            kick = phi1 - phi2 / h
+            kick = phi1 - phi2 / dem_step
             moved = 0.0
             for a in range(3):
                 acc = force[p, a] * inv_m + body_acceleration[a]
                 u = fluid_velocity[p * stride, a]
                 v = velocity[p, a]
                 w = v - u
-                step = u * h + w * phi1 + acc * phi2
+                step = u * dem_step + w * phi1 + acc * phi2
                 position[p, a] += step
                 moved += step * step
                 v_new = u + w * e + acc * kick
                 if track:  # the momentum part telescopes: -m v here, +m v at the advance's end
-                    impulse[p, a] -= mp * v + mp * acc * half_h
+                    impulse[p, a] -= mp * v + mp * acc * half_step
                 velocity[p, a] = v_new
             local = max(local, moved)
         worst[ch] = local
@@ -120,16 +122,16 @@ def integrate_initial(position, velocity, force, mass, m, count, nchunk):
 
 
 @njit(cache=True, inline="always")
-def _kick(p, velocity, force, mass, drag, body_acceleration, h, impulse, track, half_h):
+def _kick(p, velocity, force, mass, drag, body_acceleration, dem_step, impulse, track, half_step):
     """Second half of droplet p's step: add the end-of-step force's share to its velocity; complete its impulse."""
     mp = mass[p]
     inv_m = 1.0 / mp
-    kick_end = drag[p, 2] / h
+    kick_end = drag[p, 2] / dem_step
     for a in range(3):
         acc = force[p, a] * inv_m + body_acceleration[a]
         velocity[p, a] += acc * kick_end
         if track:
-            impulse[p, a] += mp * velocity[p, a] - mp * acc * half_h
+            impulse[p, a] += mp * velocity[p, a] - mp * acc * half_step
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
@@ -138,15 +140,15 @@ def integrate_final(velocity, force, mass, m, count):
 
     force (cap, 3) [N] at the new positions (and the partly updated velocities, as in velocity Verlet).
     """
-    drag, _, body_acceleration, h, impulse, _ = m
+    drag, _, body_acceleration, dem_step, impulse, _ = m
     track = impulse.shape[0] > 0
-    half_h = 0.5 * h
+    half_step = 0.5 * dem_step
     for p in prange(count):
-        _kick(p, velocity, force, mass, drag, body_acceleration, h, impulse, track, half_h)
+        _kick(p, velocity, force, mass, drag, body_acceleration, dem_step, impulse, track, half_step)
 
 
 @njit(cache=True, inline="always")
-def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride, body_acceleration, h, track,
+def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride, body_acceleration, dem_step, track,
                 impulse, position_out, velocity_out, deviation):
     """Finish droplet p's step with force (fx, fy, fz) and start the next one, writing the new state to the ``_out``
     arrays (which may be the inputs); add |step - u h| to ``deviation[p]`` when it has rows (:class:`Motion`).
@@ -154,7 +156,7 @@ def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, s
     mp = mass[p]
     inv_m = 1.0 / mp
     e, phi1, phi2 = drag[p, 0], drag[p, 1], drag[p, 2]
-    kick_end = phi2 / h
+    kick_end = phi2 / dem_step
     kick_start = phi1 - kick_end
     moved = 0.0
     away = 0.0
@@ -165,7 +167,7 @@ def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, s
         v = velocity[p, a] + acc * kick_end
         u = fluid_velocity[p * stride, a]
         w = v - u
-        step = u * h + w * phi1 + acc * phi2
+        step = u * dem_step + w * phi1 + acc * phi2
         position_out[p, a] = position[p, a] + step
         moved += step * step
         velocity_out[p, a] = u + w * e + acc * kick_start
@@ -179,9 +181,9 @@ def _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, s
     # impulse row is then neither read nor written
     if track and ((fx != 0.0) | (fy != 0.0) | (fz != 0.0) | (body_acceleration[0] != 0.0)
                   | (body_acceleration[1] != 0.0) | (body_acceleration[2] != 0.0)):
-        impulse[p, 0] -= h * (fx + mp * body_acceleration[0])
-        impulse[p, 1] -= h * (fy + mp * body_acceleration[1])
-        impulse[p, 2] -= h * (fz + mp * body_acceleration[2])
+        impulse[p, 0] -= dem_step * (fx + mp * body_acceleration[0])
+        impulse[p, 1] -= dem_step * (fy + mp * body_acceleration[1])
+        impulse[p, 2] -= dem_step * (fz + mp * body_acceleration[2])
     return moved
 
 
@@ -192,7 +194,7 @@ def integrate_kick_drift(position, velocity, force, mass, m, count, nchunk):
     Both use the same force (computed at the positions between the two steps), so this is exactly the two calls in
     a row, with one memory pass and one parallel launch instead of two. Returns the step's largest displacement [m].
     """
-    drag, fluid_velocity, body_acceleration, h, impulse, deviation = m
+    drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     worst = np.zeros(nchunk)
@@ -200,7 +202,7 @@ def integrate_kick_drift(position, velocity, force, mass, m, count, nchunk):
         local = 0.0
         for p in range(ch * count // nchunk, (ch + 1) * count // nchunk):
             moved = _kick_drift(p, position, velocity, force[p, 0], force[p, 1], force[p, 2], mass, drag,
-                                fluid_velocity, stride, body_acceleration, h, track, impulse, position, velocity,
+                                fluid_velocity, stride, body_acceleration, dem_step, track, impulse, position, velocity,
                                 deviation)
             local = max(local, moved)
         worst[ch] = local
@@ -219,7 +221,7 @@ def step_fused(position, velocity, position_next, velocity_next, b, count, c, w,
     diameter, mass, flags, partner = b
     start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _ = c
     walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
-    drag, fluid_velocity, body_acceleration, h, impulse, deviation = m  # (the contact record's h: the same step)
+    drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m  # (the contact record's h: the same step)
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     worst = np.zeros(nchunk)
@@ -231,10 +233,10 @@ def step_fused(position, velocity, position_next, velocity_next, b, count, c, w,
         for i in range(ch * count // nchunk, (ch + 1) * count // nchunk):
             fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
                                      periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law,
-                                     approach, h, walls, wall_lower, wall_upper, side, height, transverse, radius,
+                                     approach, dem_step, walls, wall_lower, wall_upper, side, height, transverse, radius,
                                      wall_zeta, candidates[ch], no_force, False, local)
             moved = max(moved, _kick_drift(i, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride,
-                                           body_acceleration, h, track, impulse, position_next, velocity_next,
+                                           body_acceleration, dem_step, track, impulse, position_next, velocity_next,
                                            deviation))
         worst[ch] = local
         travel[ch] = moved
@@ -243,25 +245,25 @@ def step_fused(position, velocity, position_next, velocity_next, b, count, c, w,
 
 @njit(cache=True, inline="always")
 def _slab_kick(s, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
-               body_acceleration, h, track, impulse, deviation, drift):
+               body_acceleration, dem_step, track, impulse, deviation, drift):
     """Finish the step of slab s's droplets with their force; with ``drift`` also start the next step and zero the
     force for the next accumulation. Droplets in free flight (``flags``) are left alone. Returns the largest
     squared displacement [m^2]."""
     moved = 0.0
-    half_h = 0.5 * h
+    half_step = 0.5 * dem_step
     for p in range(s * count // nslab, (s + 1) * count // nslab):
         if flags[p] & FREE_FLIGHT:
             continue
         if drift:
             fx, fy, fz = force[p, 0], force[p, 1], force[p, 2]
             moved = max(moved, _kick_drift(p, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride,
-                                           body_acceleration, h, track, impulse, position, velocity, deviation))
+                                           body_acceleration, dem_step, track, impulse, position, velocity, deviation))
             if (fx != 0.0) | (fy != 0.0) | (fz != 0.0):  # most rows are zero already: no write, no dirty line
                 force[p, 0] = 0.0
                 force[p, 1] = 0.0
                 force[p, 2] = 0.0
         else:
-            _kick(p, velocity, force, mass, drag, body_acceleration, h, impulse, track, half_h)
+            _kick(p, velocity, force, mass, drag, body_acceleration, dem_step, impulse, track, half_step)
     return moved
 
 
@@ -280,7 +282,7 @@ def step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, e
     diameter, mass, flags, partner = b
     start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _ = c
     walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
-    drag, fluid_velocity, body_acceleration, h, impulse, deviation = m
+    drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     worst = np.zeros(nslab)
@@ -289,23 +291,23 @@ def step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, e
         s = 2 * q
         if even_pending:
             travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity,
-                                   stride, body_acceleration, h, track, impulse, deviation, True)
+                                   stride, body_acceleration, dem_step, track, impulse, deviation, True)
         worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass, flags,
                               partner, start, index, damping, periodic_any, period, inverse_period, stiffness_ref,
-                              diameter_ref, law, approach, h, walls, wall_lower, wall_upper, side, height,
+                              diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper, side, height,
                               transverse, radius, wall_zeta, candidates[s], force)
     for q in prange(nslab // 2):
         s = 2 * q + 1
         worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass, flags,
                               partner, start, index, damping, periodic_any, period, inverse_period, stiffness_ref,
-                              diameter_ref, law, approach, h, walls, wall_lower, wall_upper, side, height,
+                              diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper, side, height,
                               transverse, radius, wall_zeta, candidates[s], force)
         travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
-                               body_acceleration, h, track, impulse, deviation, not last)
+                               body_acceleration, dem_step, track, impulse, deviation, not last)
     if last:
         for q in prange((nslab + 1) // 2):
             _slab_kick(2 * q, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
-                       body_acceleration, h, track, impulse, deviation, False)
+                       body_acceleration, dem_step, track, impulse, deviation, False)
     return worst.max(), math.sqrt(travel.max())
 
 
@@ -341,11 +343,11 @@ def finish_even_slabs(position, velocity, force, mass, flags, m, count, nslab):
     """Kick-drift the pending even slabs of :func:`step_half` (all droplets then at the same time level, forces
     zero), e.g. before a neighbour-list rebuild; ``flags`` those of the :class:`Bodies` of the steps. Returns the
     largest displacement [m]."""
-    drag, fluid_velocity, body_acceleration, h, impulse, deviation = m
+    drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     travel = np.zeros(nslab)
     for q in prange((nslab + 1) // 2):
         travel[2 * q] = _slab_kick(2 * q, nslab, count, position, velocity, force, mass, flags, drag,
-                                   fluid_velocity, stride, body_acceleration, h, track, impulse, deviation, True)
+                                   fluid_velocity, stride, body_acceleration, dem_step, track, impulse, deviation, True)
     return math.sqrt(travel.max())

@@ -108,7 +108,7 @@ def _touching_entries(i, position, diameter, flags, partner, start, index, perio
 
 @njit(cache=True, inline="always")
 def _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping, periodic_any, period,
-         inverse_period, stiffness_ref, diameter_ref, law, approach, h, walls, wall_lower, wall_upper, outlet_side,
+         inverse_period, stiffness_ref, diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper, outlet_side,
          outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching, force, half, worst):
     """The one contact-row body: force on droplet i from row i of the list and from the walls (if ``walls``):
     (fx, fy, fz, the larger of ``worst`` and the row's largest overlap ratio) [N], [-] (a running maximum: the
@@ -147,7 +147,7 @@ def _row(i, position, velocity, diameter, mass, flags, partner, start, index, da
                 force[j, 2] -= gz
             if overlap > worst * small:  # the largest ratio without a division per contact
                 worst = overlap / small
-            if record and overlap < -vn * h and ((flags[i] | flags[j]) & COALESCING) == 0:
+            if record and overlap < -vn * dem_step and ((flags[i] | flags[j]) & COALESCING) == 0:
                 approach[k] = -vn
     if walls:
         gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, mass, wall_lower, wall_upper, outlet_side,
@@ -169,7 +169,7 @@ def contact_forces_full(position, velocity, b, count, c, w, nchunk, candidates, 
     largest overlap ratio (overlap / smaller diameter) [-]. Mutual coalescence partners exert no force on each other.
     """
     diameter, mass, flags, partner = b
-    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, h = c
+    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, dem_step = c
     walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
     worst = np.zeros(nchunk)
     for ch in prange(nchunk):
@@ -177,7 +177,7 @@ def contact_forces_full(position, velocity, b, count, c, w, nchunk, candidates, 
         for i in range(ch * count // nchunk, (ch + 1) * count // nchunk):
             fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
                                      periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law,
-                                     approach, h, walls, wall_lower, wall_upper, side, height, transverse, radius,
+                                     approach, dem_step, walls, wall_lower, wall_upper, side, height, transverse, radius,
                                      wall_zeta, candidates[ch], force, False, local)
             force[i, 0] = fx
             force[i, 1] = fy
@@ -188,7 +188,7 @@ def contact_forces_full(position, velocity, b, count, c, w, nchunk, candidates, 
 
 @njit(cache=True, inline="always")
 def _slab_rows(lo, hi, position, velocity, diameter, mass, flags, partner, start, index, damping, periodic_any,
-               period, inverse_period, stiffness_ref, diameter_ref, law, approach, h, walls, wall_lower, wall_upper,
+               period, inverse_period, stiffness_ref, diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper,
                outlet_side, outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching, force):
     """Add the forces of the half-list rows lo..hi-1 (a slab: each pair to both droplets, and the walls') to
     ``force``; returns the largest overlap ratio. Rows of droplets in free flight (:data:`FREE_FLIGHT`) are
@@ -198,7 +198,7 @@ def _slab_rows(lo, hi, position, velocity, diameter, mass, flags, partner, start
         if flags[i] & FREE_FLIGHT:
             continue
         fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
-                                 periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law, approach, h,
+                                 periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law, approach, dem_step,
                                  walls, wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse,
                                  outlet_radius, wall_zeta, touching, force, True, local)
         force[i, 0] += fx
@@ -239,7 +239,7 @@ def contact_forces_half(position, velocity, b, count, c, w, nslab, candidates, f
             force[i, 1] = 0.0
             force[i, 2] = 0.0
     diameter, mass, flags, partner = b
-    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, h = c
+    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, dem_step = c
     walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
     worst = np.zeros(nslab)
     for phase in range(2):
@@ -247,7 +247,7 @@ def contact_forces_half(position, velocity, b, count, c, w, nslab, candidates, f
             s = 2 * q + phase
             worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass,
                                   flags, partner, start, index, damping, periodic_any, period, inverse_period,
-                                  stiffness_ref, diameter_ref, law, approach, h, walls, wall_lower, wall_upper, side,
+                                  stiffness_ref, diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper, side,
                                   height, transverse, radius, wall_zeta, candidates[s], force)
     return worst.max()
 

@@ -57,7 +57,7 @@ class Contacts(NamedTuple):
     ``inverse_period`` (3,) [1/m]; ``periodic_any``: some axis is periodic; ``stiffness_ref`` [N/m] at
     ``diameter_ref`` [m]; ``law``: a code of :data:`fulldem.dem.laws.CONTACT_LAWS`. ``approach`` (entries,) [m/s]:
     the first-contact record -- a kernel writes the approach speed of each touching pair at its first contact (the
-    pair's overlap is less than its approach speed times ``h`` [s], so one step earlier they did not touch) where
+    pair's overlap is less than its approach speed times ``dem_step`` [s], so one step earlier they did not touch) where
     neither droplet is marked for coalescence, into the pair's entry (threads never write the same entry); entries
     not written keep their value (the caller sets -1). An array with no entries: nothing is recorded.
     """
@@ -72,7 +72,7 @@ class Contacts(NamedTuple):
     diameter_ref: float
     law: int
     approach: np.ndarray
-    h: float
+    dem_step: float
 
 
 class Walls(NamedTuple):
@@ -103,7 +103,7 @@ class Motion(NamedTuple):
     """What the integrator needs besides positions, velocities, masses and forces.
 
     ``drag`` (cap, 3): the factors (E, phi1, phi2) of :func:`drag_factors_into`; ``fluid_velocity`` (cap, 3), or
-    (1, 3) for one velocity everywhere [m/s]; ``body_acceleration`` (3,) [m/s^2]; ``h`` [s]; ``impulse`` (cap, 3)
+    (1, 3) for one velocity everywhere [m/s]; ``body_acceleration`` (3,) [m/s^2]; ``dem_step`` [s]; ``impulse`` (cap, 3)
     [N s]: the drag impulse accumulator (an array with no rows: not tracked); ``deviation`` (cap,) [m]: each
     sub-stepped droplet's path away from drift with the fluid, sum over steps of |x_step - u h| (free flight's
     safety check, see *Free flight*; an array with no rows: not tracked).
@@ -112,7 +112,7 @@ class Motion(NamedTuple):
     drag: np.ndarray
     fluid_velocity: np.ndarray
     body_acceleration: np.ndarray
-    h: float
+    dem_step: float
     impulse: np.ndarray
     deviation: np.ndarray = NO_DEVIATION
 
@@ -121,12 +121,13 @@ class Motion(NamedTuple):
 NO_RECORD = np.zeros(0)
 
 
-def contacts_record(neighbours, damping, stiffness_ref, diameter_ref, law, approach=NO_RECORD, h=0.0) -> Contacts:
+def contacts_record(neighbours, damping, stiffness_ref, diameter_ref, law, approach=NO_RECORD,
+                    dem_step=0.0) -> Contacts:
     """A :class:`Contacts` for a :class:`fulldem.dem.neighbours.NeighbourList`'s current rows."""
     period = neighbours.period
     return Contacts(neighbours.start, neighbours.index, damping, period, neighbours.inverse_period,
                     bool((np.asarray(period) > 0.0).any()), float(stiffness_ref), float(diameter_ref), int(law),
-                    approach, float(h))
+                    approach, float(dem_step))
 
 
 def walls_record(box_lower, box_upper, periodic, absorbing_bottom, outlet, zeta) -> Walls:

@@ -41,7 +41,7 @@ class DemStepper:
     skin/2, so most steps skip the check; a rebuild may re-sort the droplets by cell (``sort_on_rebuild``) for memory
     locality. Threads are chosen by :class:`fulldem.tuning.ThreadChoice` (one below a few thousand droplets).
 
-    Parameters: box ``lower``/``size`` (3,) [m], ``periodic`` (3,) bool, step ``h`` [s], contact ``stiffness_ref``
+    Parameters: box ``lower``/``size`` (3,) [m], ``periodic`` (3,) bool, DEM step ``dem_step`` [s], contact ``stiffness_ref``
     [N/m] at ``diameter_ref`` [m], ``restitution`` [-] of droplet pairs and ``wall_restitution`` [-] (default: the
     same), ``skin`` [m], ``body_acceleration`` (3,) [m/s^2], ``law`` (a key of :data:`laws.CONTACT_LAWS`),
     ``absorbing_bottom``, ``outlet`` (side, height, transverse, radius) or None, ``half_list`` (default; False: a
@@ -60,7 +60,7 @@ class DemStepper:
     permutes them with it, or passes ``sort_on_rebuild=False``.
     """
 
-    def __init__(self, store, lower, size, periodic, h, stiffness_ref, diameter_ref, restitution, skin,
+    def __init__(self, store, lower, size, periodic, dem_step, stiffness_ref, diameter_ref, restitution, skin,
                  body_acceleration, wall_restitution=None, law="hooke", absorbing_bottom=False, outlet=None,
                  half_list=True, sort_on_rebuild=True, cell_diameter=None, threads=None, record_first_contacts=False,
                  free_flight=True):
@@ -69,7 +69,7 @@ class DemStepper:
         self.size = np.asarray(size, dtype=float)
         self.upper = self.lower + self.size
         self.periodic = np.asarray(periodic, dtype=np.bool_)
-        self.h = float(h)
+        self.dem_step = float(dem_step)
         self.stiffness_ref = float(stiffness_ref)
         self.diameter_ref = float(diameter_ref)
         self.zeta = float(laws.damping_ratio(restitution))
@@ -243,7 +243,7 @@ class DemStepper:
     def set_drag(self, beta) -> None:
         """Drag coefficients beta (cap,) [kg/s] of the droplets (0: no drag), frozen until the next call."""
         n = self.store.count
-        drag_factors_into(self.mass, beta, self.h, n, self.drag)
+        drag_factors_into(self.mass, beta, self.dem_step, n, self.drag)
         if self.rate.shape[0] < self.mass.shape[0]:
             self.rate = np.zeros(self.mass.shape[0])
         np.divide(beta[:n], self.mass[:n], out=self.rate[:n])
@@ -268,7 +268,7 @@ class DemStepper:
 
     # -- stepping
     def step(self, fluid_velocity, impulse):
-        """Advance by one step h; see :meth:`advance`."""
+        """Advance by one DEM step; see :meth:`advance`."""
         return self.advance(1, fluid_velocity, impulse)
 
     def advance(self, steps, fluid_velocity, impulse):
@@ -307,7 +307,7 @@ class DemStepper:
         self.last_free_fraction = 0.0
         if self.free_flight and fused and nl.half and n and self._advance_free(steps, fluid_velocity, impulse, nchunk):
             return self._order
-        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, impulse)
+        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.dem_step, impulse)
         self._travel_bound += integrate_initial(s.position, s.velocity, self.force, self.mass, motion, n, nchunk)
         if fused and nl.half:
             self._advance_half(steps, fluid_velocity, impulse)
@@ -323,7 +323,7 @@ class DemStepper:
                 self.compute_forces()
                 self._travel_bound += integrate_kick_drift(s.position, s.velocity, self.force, self.mass,
                                                            Motion(self.drag, fluid_velocity, self.body_acceleration,
-                                                                  self.h, impulse), n, nchunk)
+                                                                  self.dem_step, impulse), n, nchunk)
             self.steps += 1
         return self._order
 
@@ -335,7 +335,7 @@ class DemStepper:
         check falling inside the advance): the caller then sub-steps every droplet, as without free flight."""
         s, n, nl = self.store, self.store.count, self.neighbours
         counts = self.free_flight_counts
-        duration = steps * self.h
+        duration = steps * self.dem_step
         expected = self._advance_travel * steps / max(self._advance_steps, 1)
         if expected > 0.5 * nl.skin:  # the list would not last the advance
             counts.declined += 1
@@ -358,7 +358,7 @@ class DemStepper:
             return False
         self._save_start(impulse)
         start_bound = self._travel_bound
-        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, impulse, self._deviation)
+        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.dem_step, impulse, self._deviation)
         self._travel_bound += integrate_initial(s.position, s.velocity, self.force, self.mass, motion, n, nchunk)
         if not self._advance_half(steps, fluid_velocity, impulse, free=True) or (
                 farthest > valid and self._travel_bound > 0.5 * nl.skin):
@@ -391,7 +391,7 @@ class DemStepper:
             self._transient = np.zeros(capacity)
             self._reach = np.zeros(capacity)
             self._deviation = np.zeros(capacity)
-        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, NO_IMPULSE, self._deviation)
+        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.dem_step, NO_IMPULSE, self._deviation)
         return free_flight_candidates(s.position, s.velocity, self.force, self._bodies(), n, self.walls, motion,
                                       self.rate, duration, FREE_FLIGHT_MARGIN, nchunk, self._free_flags,
                                       self._transient, self._reach)
@@ -469,7 +469,7 @@ class DemStepper:
         pending = False
         nslab = slab_count(n, nl.longest_jump)
         # (a re-sort permutes these arrays in place, so the record stays valid)
-        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, impulse,
+        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.dem_step, impulse,
                         self._deviation if free else NO_DEVIATION)
         bodies = self._bodies(self._free_flags if free else None)
         done = 0
@@ -512,7 +512,7 @@ class DemStepper:
         self._ensure_candidates(nchunk)
         worst, moved = step_fused(s.position, s.velocity, self._spare_position, self._spare_velocity, self._bodies(),
                                   n, self._contacts(), self.walls,
-                                  Motion(self.drag, fluid_velocity, self.body_acceleration, self.h, impulse), nchunk,
+                                  Motion(self.drag, fluid_velocity, self.body_acceleration, self.dem_step, impulse), nchunk,
                                   self.candidates)
         s.position, self._spare_position = self._spare_position, s.position
         s.velocity, self._spare_velocity = self._spare_velocity, s.velocity
@@ -527,7 +527,7 @@ class DemStepper:
     def _contacts(self) -> Contacts:
         approach = self.approach if self.record_first_contacts else NO_RECORD
         return contacts_record(self.neighbours, self.damping, self.stiffness_ref, self.diameter_ref, self.law,
-                               approach, self.h)
+                               approach, self.dem_step)
 
     def _ensure_candidates(self, nchunk):
         longest = self.neighbours.longest_row

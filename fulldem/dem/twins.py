@@ -76,7 +76,7 @@ def wall_forces_reference(position, velocity, diameter, mass, count, box_lower, 
 
 
 def integrate_reference(position, velocity, force_old, force_new_of, mass, beta, fluid_velocity, body_acceleration,
-                        h, count):
+                        dem_step, count):
     """NumPy twin of one whole step; ``force_new_of(position, velocity)`` gives the force at the new state.
 
     Returns (position, velocity, impulse) as new arrays; the drag factors use expm1 directly (no series).
@@ -86,15 +86,15 @@ def integrate_reference(position, velocity, force_old, force_new_of, mass, beta,
     u = np.broadcast_to(fluid_velocity, (count, 3)) if len(fluid_velocity) == 1 else fluid_velocity[:count]
     rate = beta[:count, None] / m
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = rate * h
-        phi1 = np.where(z > 0, -np.expm1(-z) / np.where(z > 0, rate, 1.0), h)
-        phi2 = np.where(z > 0, (h - phi1) / np.where(z > 0, rate, 1.0), 0.5 * h * h)
+        z = rate * dem_step
+        phi1 = np.where(z > 0, -np.expm1(-z) / np.where(z > 0, rate, 1.0), dem_step)
+        phi2 = np.where(z > 0, (dem_step - phi1) / np.where(z > 0, rate, 1.0), 0.5 * dem_step * dem_step)
     e = np.exp(-z)
     acc_old = force_old[:count] / m + body_acceleration
     v_start = v.copy()
-    x = x + u * h + (v - u) * phi1 + acc_old * phi2
-    v = u + (v - u) * e + acc_old * (phi1 - phi2 / h)
+    x = x + u * dem_step + (v - u) * phi1 + acc_old * phi2
+    v = u + (v - u) * e + acc_old * (phi1 - phi2 / dem_step)
     acc_new = force_new_of(x, v) / m + body_acceleration
-    v = v + acc_new * phi2 / h
-    impulse = m * (v - v_start) - m * h * 0.5 * (acc_old + acc_new)
+    v = v + acc_new * phi2 / dem_step
+    impulse = m * (v - v_start) - m * dem_step * 0.5 * (acc_old + acc_new)
     return x, v, impulse
