@@ -52,7 +52,7 @@ from .fluid import solver
 from .fluid import walls as fluid_walls
 from .fluid.grid import Grid
 from .submodels.base import submodels_for
-from .submodels.coalescence import empty_size_table
+from .submodels.coalescence import empty_size_table, size_bin
 from .submodels.exits import classify_exits
 from .submodels.feed import draw_inlet_candidates, place_without_overlap
 from .tuning import SKIN_MIN, SORT_INTERVAL, skin_for
@@ -487,12 +487,21 @@ class Simulation:
             ident = self.store.ident
             order = np.argsort(np.minimum(ident[first], ident[second]), kind="stable")
             self.merge(first[order], second[order])
-            self.counters.merges += len(order)
 
     def merge(self, first, second):
         """Merge pairs of droplets now (:meth:`fulldem.droplets.DropletStore.merge`, periodic images taken into
-        account); only at an event point."""
-        return self.store.merge(first, second, self.lower, self.dem.neighbours.period)
+        account), counting them in :attr:`counters` (``merges``, ``merges_by_size``); only at an event point.
+
+        The one merge path of the engine: the coalescence submodel calls it at the end-of-step event point, and
+        :meth:`apply_merges` calls it for the pairs proposed during the step."""
+        s = self.store
+        first = np.asarray(first, dtype=np.int64).ravel()
+        second = np.asarray(second, dtype=np.int64).ravel()
+        small = np.minimum(s.diameter[first], s.diameter[second])
+        large = np.maximum(s.diameter[first], s.diameter[second])
+        np.add.at(self.counters.merges_by_size, (size_bin(small), size_bin(large)), 1)
+        self.counters.merges += int(first.size)
+        return s.merge(first, second, self.lower, self.dem.neighbours.period)
 
     def skin_for(self, speed):
         """Neighbour-list skin [m] for droplets moving at most ``speed`` [m/s] (see :func:`fulldem.tuning.skin_for`)."""

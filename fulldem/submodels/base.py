@@ -6,7 +6,8 @@ at the end-of-step event point, after the drag owed to the fluid is deposited (:
 exits; the reaction's re-created droplets will go there too). Between those points the droplet set is fixed (the
 step refuses a change; see :mod:`fulldem.stepper`). Droplets change only through their owner,
 :class:`fulldem.droplets.DropletStore`; a submodel that proposes merges during the step calls
-:meth:`fulldem.stepper.Simulation.propose_merges` and :class:`Merges` applies them.
+:meth:`fulldem.stepper.Simulation.propose_merges` and :class:`Merges` applies them; one that merges at an event
+point calls :meth:`fulldem.stepper.Simulation.merge`, the one merge path, which also counts the merges.
 
 A run's submodels come from :func:`submodels_for`, in the order they act: the built-in ones (feed, merges, exits)
 and those the case switches on (``[coalescence] enabled``, ``[reaction] enabled``; :data:`CASE_SUBMODELS`). A new

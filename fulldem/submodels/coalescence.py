@@ -151,12 +151,7 @@ class Coalescence(Submodel):
             self._merge(sim, first[done], second[done])
 
     def _merge(self, sim, first, second) -> None:
-        s = sim.store
-        small = np.minimum(s.diameter[first], s.diameter[second])
-        large = np.maximum(s.diameter[first], s.diameter[second])
-        np.add.at(sim.counters.merges_by_size, (size_bin(small), size_bin(large)), 1)
-        sim.counters.merges += int(first.size)
-        sim.merge(first, second)
+        sim.merge(first, second)  # counted there, by size too
 
     # -- new pairs
     def candidates(self, sim):
