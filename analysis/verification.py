@@ -70,29 +70,14 @@ def table(checks) -> pd.DataFrame:
 
 
 # ------------------------------------------------------------------------------------------------------------ Stokes
-def single_droplet(diameter, box=(0.2, 0.2, 0.2), cell=0.01, fluid_step=5e-3, t_end=1.5, extra=()):
-    """One droplet of ``diameter`` [m] (5100 kg/m^3) released 50 mm under the top of a closed box [m] of quiescent
-    slag (the simple case's), run to ``t_end`` [s]; returns (the Simulation, its settling velocity [m/s])."""
-    from fulldem.droplets import DropletStore
-    from fulldem.stepper import Simulation
-    from settler.cases import load_case
-
-    case = load_case("simple", ["feed.mass_rate=0", "coalescence.enabled=false", f"fulldem.cell_size={cell}",
-                                f"fulldem.fluid_step={fluid_step}", *extra])
-    store = DropletStore(16)
-    store.add([[box[0] / 2, box[1] / 2, box[2] - 0.05]], diameter, 5100.0)
-    sim = Simulation(case, droplets=store, feed=False, box=(box, (0.0, 0.0, 0.0)))
-    while sim.time < t_end - 1e-12:
-        sim.step()
-    return sim, float(-store.velocity[0, 2])
-
-
 def stokes_check(diameter=500e-6, kernel="filtered", tolerance=0.02) -> Check:
     """fulldem: a single droplet in the 0.2 m cube settles at the drag law's terminal velocity times the square-duct
     wall factor 1/(1 + 1.903 d/L) (tests/test_fulldem_stepper.py: 2 % at 500 um, 3 % at 2 mm)."""
     from settler.physics import square_duct_factor
 
     clock = time.perf_counter()
+    from fulldem.cases.single_droplet import single_droplet
+
     sim, velocity = single_droplet(diameter, extra=[f"fulldem.kernel={kernel}"])
     reference = sim.terminal_velocity(diameter) * square_duct_factor(diameter / 0.2)
     return Check("Stokes, single droplet (fulldem)", f"d = {diameter * 1e6:.0f} um, 0.2 m cube, 1 cm cells, {kernel} "

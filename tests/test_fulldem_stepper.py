@@ -6,15 +6,12 @@ import math
 import numpy as np
 import pytest
 
+# one droplet released in quiescent slag: the set-up the verification report runs too
+from fulldem.cases.single_droplet import single_droplet as _single_droplet
 from fulldem.droplets import DropletStore
 from fulldem.stepper import Simulation
 from settler.cases import load_case
 from settler.physics import relaxation_time, square_duct_factor, stokes_velocity
-
-# one droplet released in quiescent slag: the set-up the verification report runs too
-from analysis.verification import single_droplet as _single_droplet
-
-
 
 
 @pytest.mark.parametrize("diameter, tolerance, kernel", [(500e-6, 0.02, "filtered"), (2e-3, 0.03, "filtered"),

@@ -1,5 +1,6 @@
 """Set-ups of the verification cases, importable by the tests, analysis.verification and the verification report.
 
 What belongs here: cases built in code with their analytic reference (the case files of the settler are in
-``data/cases``): collective settling of suspensions (:mod:`.suspensions`) and the falling cloud (:mod:`.cloud`).
+``data/cases``): a single droplet settling (:mod:`.single_droplet`), collective settling of suspensions
+(:mod:`.suspensions`) and the falling cloud (:mod:`.cloud`).
 """

@@ -1,12 +1,9 @@
-"""DEM kernels for matte droplets: contact and wall forces, and an exponential velocity-Verlet integrator.
+"""The DEM stepper: advances the droplets of a store by DEM sub-steps within one fluid step.
 
-Kernels are ``@njit(cache=True)`` functions of arrays and small records (SI units); :class:`DemStepper` orchestrates
-them. The contact, wall and integrator kernels have plain NumPy twins in :mod:`fulldem.dem.twins` that the tests
-compare them with; the DEM-only benchmark's driver is ``benchmarks/bench_dem.py``.
-
-:class:`DemStepper` orchestrates the kernels of this folder: the integrator (:mod:`.integrators`), the
-contact loops (:mod:`.pairs`, :mod:`.walls`), free flight (:mod:`.free_flight`) and the neighbour list
-(:mod:`.neighbours`). The DEM-only benchmark's driver is ``benchmarks/bench_dem.py``.
+:class:`DemStepper` orchestrates the kernels of this folder -- the integrator (:mod:`.integrators`), the contact
+loops (:mod:`.pairs`, :mod:`.walls`), free flight (:mod:`.free_flight`) and the neighbour list (:mod:`.neighbours`)
+-- passing them arrays and the records of :mod:`.records`. The kernels have plain NumPy twins in :mod:`.twins` that
+the tests compare them with; the DEM-only benchmark's driver is ``benchmarks/bench_dem.py``.
 """
 
 from __future__ import annotations
