@@ -109,7 +109,7 @@ class Run:
     def droplets(self, time=None) -> tuple[float, pd.DataFrame]:
         """The droplets of the snapshot nearest ``time`` [s] (None: the last): (its time [s], DataFrame with x, y, z
         [m], diameter [m], u, v, w and settling_velocity [m/s], density [kg/m^3], age [s], merged [-]), as
-        :func:`analysis.figures.read_droplets` reads them. Raises analysis.figures.NoData where there are none
+        :func:`analysis.figures.read_droplets` reads them. Raises analysis.files.NoData where there are none
         (popbal runs have none: use :meth:`distribution`)."""
         from .figures import read_droplets
         from .files import NoData
