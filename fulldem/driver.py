@@ -195,13 +195,19 @@ def case_fingerprint(case) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+#: Case keys added after checkpoints existed, with the value that computes what the engine computed before the key:
+#: a checkpoint without the key resumes under that value (and only under it).
+KEYS_ADDED = {("coalescence", "trigger"): "first_contact"}
+
+
 def case_differences(saved: dict, case) -> list[str]:
     """``section.key: saved -> now`` for every key of :func:`case_identity` that differs between a saved identity
-    dict and ``case``."""
+    dict and ``case`` (a key of :data:`KEYS_ADDED` missing from the saved one counts as its old value)."""
     now = case_identity(case)
     out = []
     for section in sorted(set(saved) | set(now)):
         a, b = saved.get(section, {}), now.get(section, {})
+        a = {**{k: v for (sec, k), v in KEYS_ADDED.items() if sec == section and k not in a and b}, **a}
         for key in sorted(set(a) | set(b)):
             if a.get(key) != b.get(key):
                 out.append(f"{section}.{key}: checkpoint {a.get(key)!r}, now {b.get(key)!r}")

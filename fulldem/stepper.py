@@ -170,7 +170,8 @@ class Simulation:
         self.dem = DemStepper(self.store, self.lower, self.grid.size, self.periodic, self.dem_step, self.stiffness_ref,
                               d_ref, fd.restitution, SKIN_MIN * d_ref, np.zeros(3),
                               absorbing_bottom=self.bounds.absorbing_bottom, outlet=self.bounds.contact_outlet(),
-                              sort_on_rebuild=False, record_first_contacts=case.coalescence.enabled)
+                              sort_on_rebuild=False, record_first_contacts=case.coalescence.enabled,
+                              every_contact=case.coalescence.trigger == "every_contact")
 
         # coupling tables and work arrays
         self.kernel = (fd.sigma_cells, fd.sigma_diameter, smoothing.DEFAULT_CUT)

@@ -137,6 +137,26 @@ def test_instantaneous_mode_merges_at_first_contact():
     assert s.count == 1 and sim.counters.merges == 1 and s.flags[0] == MERGED
 
 
+@pytest.mark.parametrize("trigger, merges", [("every_contact", 1), ("first_contact", 0)])
+def test_a_pair_resting_in_contact_merges_only_when_every_contact_is_evaluated(trigger, merges):
+    """Two equal droplets side by side, touching (overlap 1e-4 d) and at rest, settle together: they never make a
+    first contact, so under 'first_contact' they are never evaluated; under 'every_contact' their approach speed is
+    0, so P_c = 1 >= 0.5 (seed Eq. 2 at Weber number 0), the merged 0.63 mm is within the 1.5 mm limit, and they are
+    marked at the first event point and merge once grown (0.08 s at growth_rate 2) and drawn together."""
+    d = 0.5e-3
+    case = load_case("simple", [*SMALL_BOX, f"coalescence.trigger={trigger}"])
+    assert coalescence_probability(d, d, 0.0, 5100.0, case.slag.density, case.matte.interfacial_tension,
+                                   case.coalescence.psi, case.coalescence.virtual_mass) >= case.coalescence.threshold
+    store = DropletStore(16)
+    half = 0.5 * d * (1.0 - 1e-4)
+    store.add([[0.02 - half, 0.02, 0.03], [0.02 + half, 0.02, 0.03]], d, 5100.0)
+    sim = Simulation(case, droplets=store, feed=False, box=((BOX,) * 3, (0.0, 0.0, 0.0)))
+    for _ in range(100):  # 0.2 s
+        sim.step()
+    assert sim.counters.merges == merges
+    assert store.count == 2 - merges
+
+
 def _cloud(threads):
     """294 droplets of 0.6-1.6 mm in a periodic box whose pressure gradient carries their weight: many
     collisions and merges in 60 steps."""

@@ -290,3 +290,13 @@ def test_an_ignored_sigint_stays_ignored(tmp_path, monkeypatch):
     frame = run_case(load_case("demo", SMALL), tmp_path, end_time=0.01, progress=False, log=quiet)
     assert frame["time"].iloc[-1] == pytest.approx(0.01)
     assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
+def test_a_checkpoint_from_before_a_key_existed_resumes_only_under_the_keys_old_meaning():
+    """A checkpoint's case identity without coalescence.trigger (written before the key existed) matches a case
+    with the value that computes what the engine computed then ('first_contact', fr.KEYS_ADDED), and no other."""
+    old = fr.case_identity(load_case("demo"))
+    del old["coalescence"]["trigger"]
+    assert fr.case_differences(old, load_case("demo")) == []
+    assert fr.case_differences(old, load_case("demo", ["coalescence.trigger=every_contact"])) == [
+        "coalescence.trigger: checkpoint 'first_contact', now 'every_contact'"]

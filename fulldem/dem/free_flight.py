@@ -128,7 +128,7 @@ def free_flight_pairs(position, diameter, count, c, fluid_velocity, duration, fa
     :func:`contact_forces_half` (a pair writes only within the longest jump of its row's slab). Returns the number
     of droplets left free.
     """
-    start, index, _, period, inverse_period, periodic_any, _, _, _, _, _ = c
+    start, index, _, period, inverse_period, periodic_any, _, _, _, _, _, _ = c
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     for phase in range(2):
         for q in prange((nslab - phase + 1) // 2):

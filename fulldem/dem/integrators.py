@@ -219,9 +219,11 @@ def step_fused(position, velocity, position_next, velocity_next, b, count, c, w,
     (largest overlap ratio [-], largest displacement [m]).
     """
     diameter, mass, flags, partner = b
-    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _ = c
+    (start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _,
+     every_contact) = c
     walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
-    drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m  # (the contact record's h: the same step)
+    drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m  # (the contact record's dem_step: the same step)
+    record_window = -1.0 if every_contact else dem_step  # < 0: every contact recorded (Contacts.every_contact)
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     worst = np.zeros(nchunk)
@@ -233,7 +235,7 @@ def step_fused(position, velocity, position_next, velocity_next, b, count, c, w,
         for i in range(ch * count // nchunk, (ch + 1) * count // nchunk):
             fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
                                      periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law,
-                                     approach, dem_step, walls, wall_lower, wall_upper, side, height, transverse, radius,
+                                     approach, record_window, walls, wall_lower, wall_upper, side, height, transverse, radius,
                                      wall_zeta, candidates[ch], no_force, False, local)
             moved = max(moved, _kick_drift(i, position, velocity, fx, fy, fz, mass, drag, fluid_velocity, stride,
                                            body_acceleration, dem_step, track, impulse, position_next, velocity_next,
@@ -280,9 +282,11 @@ def step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, e
     partitioning rules as :func:`contact_forces_half`. Returns (largest overlap ratio [-], largest displacement [m]).
     """
     diameter, mass, flags, partner = b
-    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _ = c
+    (start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _,
+     every_contact) = c
     walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
     drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m
+    record_window = -1.0 if every_contact else dem_step  # < 0: every contact recorded (Contacts.every_contact)
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
     worst = np.zeros(nslab)
@@ -294,13 +298,13 @@ def step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, e
                                    stride, body_acceleration, dem_step, track, impulse, deviation, True)
         worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass, flags,
                               partner, start, index, damping, periodic_any, period, inverse_period, stiffness_ref,
-                              diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper, side, height,
+                              diameter_ref, law, approach, record_window, walls, wall_lower, wall_upper, side, height,
                               transverse, radius, wall_zeta, candidates[s], force)
     for q in prange(nslab // 2):
         s = 2 * q + 1
         worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass, flags,
                               partner, start, index, damping, periodic_any, period, inverse_period, stiffness_ref,
-                              diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper, side, height,
+                              diameter_ref, law, approach, record_window, walls, wall_lower, wall_upper, side, height,
                               transverse, radius, wall_zeta, candidates[s], force)
         travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
                                body_acceleration, dem_step, track, impulse, deviation, not last)

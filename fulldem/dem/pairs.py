@@ -108,7 +108,7 @@ def _touching_entries(i, position, diameter, flags, partner, start, index, perio
 
 @njit(cache=True, inline="always")
 def _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping, periodic_any, period,
-         inverse_period, stiffness_ref, diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper, outlet_side,
+         inverse_period, stiffness_ref, diameter_ref, law, approach, record_window, walls, wall_lower, wall_upper, outlet_side,
          outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching, force, half, worst):
     """The one contact-row body: force on droplet i from row i of the list and from the walls (if ``walls``):
     (fx, fy, fz, the larger of ``worst`` and the row's largest overlap ratio) [N], [-] (a running maximum: the
@@ -119,8 +119,11 @@ def _row(i, position, velocity, diameter, mass, flags, partner, start, index, da
     The row is first filtered into the entries of touching partners (``touching``: a work row, filled without a
     branch per entry), then only their forces are computed, with the entries' dashpot coefficients. With ``half``
     (a half list: each pair in one row only) each pair force is also subtracted from ``force[j]`` of the partner;
-    with a full list ``force`` is not touched (the caller stores or uses the returned force). First contacts are
-    written to ``approach`` when it has entries (see :class:`Contacts`).
+    with a full list ``force`` is not touched (the caller stores or uses the returned force). Contacts are written
+    to ``approach`` when it has entries (see :class:`Contacts`): first contacts, whose overlap is less than the
+    approach speed times ``record_window`` (the DEM step [s]), or every contact where ``record_window`` < 0
+    (``Contacts.every_contact``; one argument for both, since a call of more than 30 arguments compiles to a
+    star-args call, which Numba cannot inline).
     """
     xi, yi, zi = position[i, 0], position[i, 1], position[i, 2]
     di = diameter[i]
@@ -147,8 +150,11 @@ def _row(i, position, velocity, diameter, mass, flags, partner, start, index, da
                 force[j, 2] -= gz
             if overlap > worst * small:  # the largest ratio without a division per contact
                 worst = overlap / small
-            if record and overlap < -vn * dem_step and ((flags[i] | flags[j]) & COALESCING) == 0:
-                approach[k] = -vn
+            if record and ((flags[i] | flags[j]) & COALESCING) == 0:
+                if record_window < 0.0:  # every contact, at its current approach speed (0 for a pair at rest)
+                    approach[k] = max(-vn, 0.0)
+                elif overlap < -vn * record_window:  # first contact: one step earlier the pair did not touch
+                    approach[k] = -vn
     if walls:
         gx, gy, gz, ratio = _wall_force(i, position, velocity, diameter, mass, wall_lower, wall_upper, outlet_side,
                                         outlet_height, outlet_transverse, outlet_radius, stiffness_ref, diameter_ref,
@@ -169,15 +175,17 @@ def contact_forces_full(position, velocity, b, count, c, w, nchunk, candidates, 
     largest overlap ratio (overlap / smaller diameter) [-]. Mutual coalescence partners exert no force on each other.
     """
     diameter, mass, flags, partner = b
-    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, dem_step = c
+    (start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, dem_step,
+     every_contact) = c
     walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
+    record_window = -1.0 if every_contact else dem_step  # < 0: every contact recorded (Contacts.every_contact)
     worst = np.zeros(nchunk)
     for ch in prange(nchunk):
         local = 0.0
         for i in range(ch * count // nchunk, (ch + 1) * count // nchunk):
             fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
                                      periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law,
-                                     approach, dem_step, walls, wall_lower, wall_upper, side, height, transverse, radius,
+                                     approach, record_window, walls, wall_lower, wall_upper, side, height, transverse, radius,
                                      wall_zeta, candidates[ch], force, False, local)
             force[i, 0] = fx
             force[i, 1] = fy
@@ -188,7 +196,7 @@ def contact_forces_full(position, velocity, b, count, c, w, nchunk, candidates, 
 
 @njit(cache=True, inline="always")
 def _slab_rows(lo, hi, position, velocity, diameter, mass, flags, partner, start, index, damping, periodic_any,
-               period, inverse_period, stiffness_ref, diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper,
+               period, inverse_period, stiffness_ref, diameter_ref, law, approach, record_window, walls, wall_lower, wall_upper,
                outlet_side, outlet_height, outlet_transverse, outlet_radius, wall_zeta, touching, force):
     """Add the forces of the half-list rows lo..hi-1 (a slab: each pair to both droplets, and the walls') to
     ``force``; returns the largest overlap ratio. Rows of droplets in free flight (:data:`FREE_FLIGHT`) are
@@ -198,7 +206,7 @@ def _slab_rows(lo, hi, position, velocity, diameter, mass, flags, partner, start
         if flags[i] & FREE_FLIGHT:
             continue
         fx, fy, fz, local = _row(i, position, velocity, diameter, mass, flags, partner, start, index, damping,
-                                 periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law, approach, dem_step,
+                                 periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law, approach, record_window,
                                  walls, wall_lower, wall_upper, outlet_side, outlet_height, outlet_transverse,
                                  outlet_radius, wall_zeta, touching, force, True, local)
         force[i, 0] += fx
@@ -239,15 +247,17 @@ def contact_forces_half(position, velocity, b, count, c, w, nslab, candidates, f
             force[i, 1] = 0.0
             force[i, 2] = 0.0
     diameter, mass, flags, partner = b
-    start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, dem_step = c
+    (start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, dem_step,
+     every_contact) = c
     walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta = w
+    record_window = -1.0 if every_contact else dem_step  # < 0: every contact recorded (Contacts.every_contact)
     worst = np.zeros(nslab)
     for phase in range(2):
         for q in prange((nslab - phase + 1) // 2):
             s = 2 * q + phase
             worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass,
                                   flags, partner, start, index, damping, periodic_any, period, inverse_period,
-                                  stiffness_ref, diameter_ref, law, approach, dem_step, walls, wall_lower, wall_upper, side,
+                                  stiffness_ref, diameter_ref, law, approach, record_window, walls, wall_lower, wall_upper, side,
                                   height, transverse, radius, wall_zeta, candidates[s], force)
     return worst.max()
 

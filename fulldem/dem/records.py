@@ -59,7 +59,9 @@ class Contacts(NamedTuple):
     the first-contact record -- a kernel writes the approach speed of each touching pair at its first contact (the
     pair's overlap is less than its approach speed times ``dem_step`` [s], so one step earlier they did not touch) where
     neither droplet is marked for coalescence, into the pair's entry (threads never write the same entry); entries
-    not written keep their value (the caller sets -1). An array with no entries: nothing is recorded.
+    not written keep their value (the caller sets -1). An array with no entries: nothing is recorded. With
+    ``every_contact`` every touching pair of free droplets is recorded at every step, with max(-v_n, 0) (the
+    coalescence submodel's ``trigger = "every_contact"``).
     """
 
     start: np.ndarray
@@ -73,6 +75,7 @@ class Contacts(NamedTuple):
     law: int
     approach: np.ndarray
     dem_step: float
+    every_contact: bool = False
 
 
 class Walls(NamedTuple):
@@ -122,12 +125,12 @@ NO_RECORD = np.zeros(0)
 
 
 def contacts_record(neighbours, damping, stiffness_ref, diameter_ref, law, approach=NO_RECORD,
-                    dem_step=0.0) -> Contacts:
+                    dem_step=0.0, every_contact=False) -> Contacts:
     """A :class:`Contacts` for a :class:`fulldem.dem.neighbours.NeighbourList`'s current rows."""
     period = neighbours.period
     return Contacts(neighbours.start, neighbours.index, damping, period, neighbours.inverse_period,
                     bool((np.asarray(period) > 0.0).any()), float(stiffness_ref), float(diameter_ref), int(law),
-                    approach, float(dem_step))
+                    approach, float(dem_step), bool(every_contact))
 
 
 def walls_record(box_lower, box_upper, periodic, absorbing_bottom, outlet, zeta) -> Walls:

@@ -44,7 +44,8 @@ class DemStepper:
     ``absorbing_bottom``, ``outlet`` (side, height, transverse, radius) or None, ``half_list`` (default; False: a
     full list, each pair computed from both sides but a whole step in one pass -- measured slower on the benchmark,
     1.5x single-threaded), ``sort_on_rebuild``, ``cell_diameter`` [m] (None: 99th percentile), ``threads`` (None:
-    chosen by timing, see :meth:`advance`).
+    chosen by timing, see :meth:`advance`); ``record_first_contacts`` keeps the record of :class:`Contacts` for the coalescence
+    submodel, ``every_contact`` records every contact of free droplets instead of first ones only).
 
     The caller (the coupling) owns the drag: :meth:`set_drag` with beta (cap,) [kg/s] whenever it changes, the fluid
     velocity at the droplets (cap, 3) or (1, 3) [m/s] and the ``impulse`` accumulator (cap, 3) [N s] passed to
@@ -60,7 +61,7 @@ class DemStepper:
     def __init__(self, store, lower, size, periodic, dem_step, stiffness_ref, diameter_ref, restitution, skin,
                  body_acceleration, wall_restitution=None, law="hooke", absorbing_bottom=False, outlet=None,
                  half_list=True, sort_on_rebuild=True, cell_diameter=None, threads=None, record_first_contacts=False,
-                 free_flight=True):
+                 free_flight=True, every_contact=False):
         self.store = store
         self.lower = np.asarray(lower, dtype=float)
         self.size = np.asarray(size, dtype=float)
@@ -81,6 +82,7 @@ class DemStepper:
         self.walls = walls_record(self.lower, self.upper, self.periodic, self.absorbing_bottom, self.outlet,
                                   self.wall_zeta)
         self.record_first_contacts = bool(record_first_contacts)
+        self.every_contact = bool(every_contact)  # the record holds every contact, not only first ones
         self.approach = np.zeros(0)  # the list entries' first-contact record (Contacts.approach), when recording
         self._first_contacts = []  # (ident a, ident b, approach speed) arrays read from the record since the last take
         self.sort_on_rebuild = bool(sort_on_rebuild)
@@ -524,7 +526,7 @@ class DemStepper:
     def _contacts(self) -> Contacts:
         approach = self.approach if self.record_first_contacts else NO_RECORD
         return contacts_record(self.neighbours, self.damping, self.stiffness_ref, self.diameter_ref, self.law,
-                               approach, self.dem_step)
+                               approach, self.dem_step, self.every_contact)
 
     def _ensure_candidates(self, nchunk):
         longest = self.neighbours.longest_row

@@ -1,8 +1,13 @@
 """The coalescence submodel of the seed paper (section 3.3.1): colliding droplets are marked, grow and merge.
 
-At every droplet-droplet contact the DEM kernels record the *first* contact of a pair -- its overlap is less than its
-approach speed times the DEM step, so a step earlier the two did not touch -- with its normal approach speed, per
-neighbour-list entry (:class:`fulldem.dem.records.Contacts`; threads never write the same entry). At the fluid step's
+Which contacts are evaluated is ``trigger``. With ``"first_contact"`` the DEM kernels record the *first* contact of a
+pair -- its overlap is less than its approach speed times the DEM step, so a step earlier the two did not touch --
+with its normal approach speed; with ``"every_contact"`` (the seed paper's "during every droplet-droplet contact")
+they record every pair in contact whose droplets are both free, with its current normal approach speed max(-v_n, 0)
+at the last DEM sub-step it was in contact during the fluid step (0 for a pair at rest or drawing apart: Eq. 2 then
+has a Weber number of 0 and P_c = 1, so a resting pair within the size limit merges, as droplets pressed together
+under the roof do). Either way the record is per neighbour-list entry (:class:`fulldem.dem.records.Contacts`;
+threads never write the same entry). At the fluid step's
 end-of-step event point (:mod:`fulldem.submodels`) this submodel, in a fixed order:
 
 1. grows every marked pair's *contact* diameters by ``growth_rate`` x d_m x dt (d_m the merged diameter), up to
@@ -10,7 +15,7 @@ end-of-step event point (:mod:`fulldem.submodels`) this submodel, in a fixed ord
    reached it and have met
    (:meth:`fulldem.droplets.DropletStore.merge`: volume, mass, momentum, Cu2S and mass x age conserved exactly; the
    merged droplet sits at the centre of mass);
-2. reads the step's first contacts, keeps those where P_c >= ``threshold`` (seed Eq. 2,
+2. reads the step's recorded contacts, keeps those where P_c >= ``threshold`` (seed Eq. 2,
    :func:`settler.physics.coalescence_probability`, with the Weber number of the approach speed; the same step rule
    popbal applies, :func:`settler.physics.collision_merges`) and the merged droplet would not exceed ``size_limit``,
    and, in order of the pair's idents, marks each pair whose droplets are both free (``mode = "delayed"``): they no
@@ -26,9 +31,9 @@ Counts: merges (:attr:`fulldem.stepper.Counters.merges`), droplets formed by a m
 :data:`fulldem.droplets.MERGED`) and a table of merges by the size pair (:data:`SIZE_BINS`), which the time series and
 ``merges_by_size.csv`` report.
 
-Differences from the paper, and why. The approach speed is the normal component of the relative velocity at first
-contact (EDEM evaluated the model at every contact time step with its current relative velocity; the issue asks for
-the speed at first contact, the physically meaningful collision speed). The growth happens at the fluid step's event
+Differences from the paper, and why. With ``trigger = "first_contact"`` the approach speed is the normal component
+of the relative velocity at first contact, and a pair is evaluated once (EDEM evaluated the model at every contact
+time step with its current relative velocity, which ``"every_contact"`` does at every fluid step). The growth happens at the fluid step's event
 point in steps of ``growth_rate`` x d_m x dt (EDEM grew every DEM step); the case key sets its speed. And marked
 partners are drawn together along their line of centres as they grow, keeping their centre of mass, at a fixed
 speed (below) with which partners that met at contact distance meet at the centre of mass when both are grown; the
@@ -155,8 +160,8 @@ class Coalescence(Submodel):
 
     # -- new pairs
     def candidates(self, sim):
-        """This step's first contacts that would coalesce, as disjoint index pairs (first, second) of free droplets,
-        in the order of the pairs' idents."""
+        """This step's recorded contacts (first or every, ``trigger``) that would coalesce, as disjoint index pairs
+        (first, second) of free droplets, in the order of the pairs' idents."""
         s, n = sim.store, sim.store.count
         a, b, speed = sim.dem.take_first_contacts()
         if a.size == 0 or n == 0:
