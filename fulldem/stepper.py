@@ -205,6 +205,7 @@ class Simulation:
         self.beta = np.zeros(capacity)
         self.fluid_velocity = np.zeros((capacity, 3))
         self.drift_velocity = np.zeros((capacity, 3))  # u + F/beta, what the DEM sees (see step)
+        self.drift_version = -1  # the store version drift_velocity belongs to (see step)
         self.deposited = np.zeros((len(DEPOSIT_COMPONENTS), capacity))
         self.interpolated = np.zeros((len(INTERPOLATE_COMPONENTS), capacity))
         self.own = np.zeros(capacity)
@@ -445,6 +446,7 @@ class Simulation:
         # velocities, hence the dashpot forces, after its forces were computed)
         at_start = self.dem.max_overlap_ratio if rebuilt else self.dem.compute_forces()
         self.dem.advance(self.substeps, self.drift_velocity, self.impulse)
+        self.drift_version = s.version  # drift_velocity's rows are the store's droplets while this holds
         worst = max(at_start, self.dem.peak_overlap_ratio)
         # ... and the fluid is owed -J, deposited where the droplets felt the fluid
         owed_rows(self.impulse, self.external, self.substeps * self.dem_step, n, -inv_cell_volume / self.dt, values)

@@ -157,6 +157,31 @@ def test_a_pair_resting_in_contact_merges_only_when_every_contact_is_evaluated(t
     assert store.count == 2 - merges
 
 
+def test_a_marked_pair_settling_at_different_speeds_merges_within_its_growth_time():
+    """A 1.5 mm droplet falls onto a 0.5 mm one below it (5.5 mm/s faster). Once marked they no longer push each
+    other, so the large one falls on through the small one: the draw must follow their differential settling, or
+    the pair drifts apart and stays marked (the delayed merge's failure in dilute settling). It merges within its
+    growth time (the smaller partner's contact diameter growing to growth_target x d_m at growth_rate x d_m per
+    second) plus one fluid step after it was marked."""
+    case = load_case("simple", [*SMALL_BOX, "coalescence.size_limit=4e-3"])
+    large, small = 1.5e-3, 0.5e-3
+    store = DropletStore(16)
+    store.add([[0.02, 0.02, 0.03 + 1.2e-3], [0.02, 0.02, 0.03]], [large, small], 5100.0)
+    sim = Simulation(case, droplets=store, feed=False, box=((BOX,) * 3, (0.0, 0.0, 0.0)))
+    merged = (large**3 + small**3) ** (1.0 / 3.0)
+    c = case.coalescence
+    growth_steps = math.ceil((c.growth_target * merged - small) / (c.growth_rate * sim.dt * merged))
+    marked_at = None
+    for step in range(400):
+        sim.step()
+        if marked_at is None and (store.flags[: store.count] & COALESCING).any():
+            marked_at = step
+        if sim.counters.merges:
+            break
+    assert marked_at is not None and sim.counters.merges == 1
+    assert step - marked_at <= growth_steps + 1
+
+
 def _cloud(threads):
     """294 droplets of 0.6-1.6 mm in a periodic box whose pressure gradient carries their weight: many
     collisions and merges in 60 steps."""
