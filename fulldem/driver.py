@@ -157,6 +157,9 @@ def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
     fed = c.mass_fed + sim.initial_mass
     coalesced = int(((s.flags[:n] & MERGED) != 0).sum())
     merges, c.merges_reported = c.merges - c.merges_reported, c.merges
+    marks, c.marks_reported = c.marks - c.marks_reported, c.marks
+    refused, c.refused_reported = c.refused_size - c.refused_reported, c.refused_size
+    own = {k: v for submodel in sim.submodels for k, v in submodel.columns(sim).items()}
     return {
         "time": sim.time,
         "droplet_count": n,
@@ -174,6 +177,10 @@ def time_series_row(sim: Simulation, wall_time=math.nan) -> dict:
         "coalesced_count": coalesced,
         "uncoalesced_count": n - coalesced,
         "merges": merges,
+        "pairs_marked": marks if sim.case.coalescence.enabled else math.nan,
+        "merges_refused_by_size": refused if sim.case.coalescence.enabled else math.nan,
+        "pairs_waiting": own.get("pairs_waiting", math.nan),
+        "longest_marked": own.get("longest_marked", math.nan),
         "max_cell_reynolds": sim.last.get("max_cell_reynolds", math.nan),
         "max_cfl": sim.last.get("max_cfl", math.nan),
         "max_overlap_ratio": sim.last.get("max_overlap_ratio", math.nan),

@@ -21,7 +21,9 @@ Arrays and units:
 * ``original_diameter`` (cap,) [m] diameter at the feed composition (Cu2S mass is proportional to its cube);
 * ``age`` (cap,) [s] time since feeding (reaction submodel);
 * ``flags`` (cap,) int32 bit flags (:data:`COALESCING`, ...); ``partner`` (cap,) int64 index of the coalescence
-  partner or -1; ``ident`` (cap,) int64 unique droplet number (never reused within a run).
+  partner or -1; ``ident`` (cap,) int64 unique droplet number (never reused within a run);
+* ``marked_time`` (cap,) [s] simulated time at which the droplet was marked for coalescence (read only while it is
+  marked; NaN where a checkpoint from before the field did not say).
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ FIELDS = {
     "flags": (None, np.int32),
     "partner": (None, np.int64),
     "ident": (None, np.int64),
+    "marked_time": (None, np.float64),
 }
 
 
@@ -197,9 +200,10 @@ class DropletStore:
         self.remove(mask)
         return keep - np.searchsorted(np.sort(gone), keep)
 
-    def mark_pairs(self, first, second) -> None:
-        """Mark each pair (``first[k]``, ``second[k]``) of free live droplets for coalescence: flag
-        :data:`COALESCING` and point each at the other (mutual partners exert no contact force on each other)."""
+    def mark_pairs(self, first, second, time=np.nan) -> None:
+        """Mark each pair (``first[k]``, ``second[k]``) of free live droplets for coalescence at simulated ``time``
+        [s]: flag :data:`COALESCING` and point each at the other (mutual partners exert no contact force on each
+        other)."""
         i = np.asarray(first, dtype=np.int64).ravel()
         j = np.asarray(second, dtype=np.int64).ravel()
         both = np.concatenate([i, j])
@@ -208,6 +212,7 @@ class DropletStore:
             raise ValueError("droplets: mark_pairs() takes disjoint pairs of droplets not yet marked")
         self.flags[both] |= COALESCING
         self.partner[i], self.partner[j] = j, i
+        self.marked_time[both] = time
 
     def set_contact_diameters(self, index, contact_diameter) -> None:
         """Set the contact diameters [m] of the given droplets (a marked pair's growth; at least their diameters)."""
@@ -263,6 +268,8 @@ class DropletStore:
         missing from ``state`` raises KeyError naming it)."""
         if "contact_diameter" not in state and "diameter" in state:  # a checkpoint from before grown sizes existed
             state = {**state, "contact_diameter": state["diameter"]}
+        if "marked_time" not in state and "diameter" in state:  # a checkpoint from before marks were timed
+            state = {**state, "marked_time": np.full(len(state["diameter"]), np.nan)}
         missing = [name for name in FIELDS if name not in state]
         if missing:
             raise KeyError(f"droplet state has no field(s) {missing}")

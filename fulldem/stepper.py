@@ -65,8 +65,9 @@ MOBILITY_RATIOS = np.array([0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0])
 @dataclass
 class Counters:
     """Matte mass bookkeeping [kg] and event counts since t = 0 (``recreated``: the stepped reaction's changes of
-    material); ``merges_reported``: ``merges`` at the last
-    time-series row; ``merges_by_size``: merges by the size bins of the two droplets
+    material; ``marks``: pairs marked by the delayed coalescence; ``refused_size``: evaluated pairs refused because
+    the merged droplet would exceed the size limit); ``merges_reported`` (``marks_reported``,
+    ``refused_reported``): ``merges`` (``marks``, ``refused_size``) at the last time-series row; ``merges_by_size``: merges by the size bins of the two droplets
     (:func:`fulldem.submodels.coalescence.size_bin`, smaller first)."""
 
     mass_fed: float = 0.0
@@ -78,7 +79,11 @@ class Counters:
     lost: int = 0
     merges: int = 0
     recreated: int = 0
+    marks: int = 0
+    refused_size: int = 0
     merges_reported: int = 0
+    marks_reported: int = 0
+    refused_reported: int = 0
     merges_by_size: np.ndarray = field(default_factory=empty_size_table)
 
     def __post_init__(self):
@@ -90,7 +95,8 @@ class Counters:
 
     def totals(self) -> dict:
         """The counts and masses without the size table (for summaries)."""
-        return {k: v for k, v in vars(self).items() if k not in ("merges_by_size", "merges_reported")}
+        return {k: v for k, v in vars(self).items()
+                if k not in ("merges_by_size", "merges_reported", "marks_reported", "refused_reported")}
 
 
 class StepDiagnostics(dict):

@@ -42,6 +42,12 @@ TIME_SERIES: dict[str, tuple[str, str]] = {
     "uncoalesced_count": ("-", "droplets in the slag that never coalesced (seed paper Fig. 15; full engine, NaN in "
                                "reduced)"),
     "merges": ("-", "coalescence events since the previous row (full engine; NaN in reduced)"),
+    "pairs_marked": ("-", "pairs marked for the delayed merge since the previous row (full engine; NaN in reduced)"),
+    "merges_refused_by_size": ("-", "evaluated pairs refused since the previous row because the merged droplet would "
+                                    "exceed coalescence.size_limit (full engine; NaN in reduced)"),
+    "pairs_waiting": ("-", "marked pairs past their growth time plus one fluid step, not yet merged (full engine; NaN "
+                           "in reduced)"),
+    "longest_marked": ("s", "longest time any marked pair has been marked (full engine; NaN in reduced)"),
     "max_cell_reynolds": ("-", "largest cell Reynolds number of the slag flow (full engine; NaN in reduced)"),
     "max_cfl": ("-", "largest advective CFL number of the slag flow (full engine; NaN in reduced)"),
     "max_overlap_ratio": ("-", "largest contact overlap / smaller diameter (full engine; NaN in reduced)"),

@@ -30,6 +30,10 @@ class Submodel:
     def at_end(self, sim) -> None:
         """At the end-of-step event point, after the owed drag is deposited."""
 
+    def columns(self, sim) -> dict:
+        """The submodel's own columns of the time-series row (names of :data:`settler.output.TIME_SERIES`), now."""
+        return {}
+
 
 class Feed(Submodel):
     """Inserts the droplets due by the case's feed schedule over the inlet (when the simulation's feed is on)."""

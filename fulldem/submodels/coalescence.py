@@ -29,7 +29,10 @@ would otherwise hold 1.71 times the true volume).
 
 Counts: merges (:attr:`fulldem.stepper.Counters.merges`), droplets formed by a merge (flag
 :data:`fulldem.droplets.MERGED`) and a table of merges by the size pair (:data:`SIZE_BINS`), which the time series and
-``merges_by_size.csv`` report.
+``merges_by_size.csv`` report; what limits the rate: pairs marked and pairs refused by the size limit
+(:attr:`fulldem.stepper.Counters.marks`, ``refused_size``, per row in the time series), and, from
+:meth:`Coalescence.columns`, the marked pairs waiting past their growth time plus one fluid step and the longest time
+a pair has been marked.
 
 Differences from the paper, and why. With ``trigger = "first_contact"`` the approach speed is the normal component
 of the relative velocity at first contact, and a pair is evaluated once (EDEM evaluated the model at every contact
@@ -133,6 +136,24 @@ class Coalescence(Submodel):
             self.grow_and_merge(sim)
         self.mark(sim)
 
+    def columns(self, sim) -> dict:
+        """What limits the merge rate now, for the time series: ``pairs_waiting``, marked pairs past their growth
+        time plus one fluid step (grown, but not yet met: held apart by neighbours), and ``longest_marked`` [s], the
+        longest any marked pair has been marked (0 without marked pairs; NaN for pairs marked before a resume from a
+        checkpoint that did not time its marks)."""
+        s, n = sim.store, sim.store.count
+        marked = np.flatnonzero((s.flags[:n] & COALESCING) != 0)
+        first = marked[s.partner[marked] > marked]
+        if first.size == 0:
+            return {"pairs_waiting": 0, "longest_marked": 0.0}
+        second = s.partner[first]
+        merged = merged_diameter_v(s.diameter[first], s.diameter[second])
+        small = np.minimum(s.diameter[first], s.diameter[second])
+        growth_time = np.maximum(self.growth_target * merged - small, 0.0) / (self.growth_rate * merged)
+        marked_for = sim.time - s.marked_time[first]
+        return {"pairs_waiting": int((marked_for > growth_time + sim.dt).sum()),
+                "longest_marked": float(np.max(marked_for))}
+
     # -- marked pairs
     def grow_and_merge(self, sim) -> None:
         """Grow every marked pair's contact diameters by one fluid step, draw the partners together at the pair's
@@ -208,8 +229,10 @@ class Coalescence(Submodel):
         i, j, speed = i[first_of_pair], j[first_of_pair], speed[first_of_pair]
         # the size limit, then seed Eq. 2 under the step rule at the pair's mean density
         d_i, d_j = s.diameter[i], s.diameter[j]
+        free = ((s.flags[i] | s.flags[j]) & COALESCING) == 0
         keep = merged_diameter_v(d_i, d_j) <= self.size_limit
-        keep &= ((s.flags[i] | s.flags[j]) & COALESCING) == 0
+        sim.counters.refused_size += int((free & ~keep).sum())
+        keep &= free
         volume_i, volume_j = d_i**3, d_j**3
         density = (s.density[i] * volume_i + s.density[j] * volume_j) / (volume_i + volume_j)
         for k in np.flatnonzero(keep):
@@ -234,4 +257,5 @@ class Coalescence(Submodel):
         if self.mode == "instantaneous":
             self._merge(sim, first, second)
         else:
-            sim.store.mark_pairs(first, second)
+            sim.store.mark_pairs(first, second, sim.time)
+            sim.counters.marks += int(first.size)
