@@ -19,12 +19,9 @@ import math
 import time
 
 import numpy as np
-from scipy.spatial import cKDTree
-
-from fulldem.droplets import COALESCING, DropletStore
-from fulldem.stepper import Simulation
+from fulldem.cases.bidisperse import bidisperse_suspension
+from fulldem.droplets import COALESCING
 from fulldem.submodels.coalescence import size_bin
-from settler.cases import load_case
 
 
 def main(argv=None):
@@ -37,27 +34,15 @@ def main(argv=None):
     parser.add_argument("--growth-rate", type=float, default=None, help="coalescence.growth_rate [1/s] (default: the case's)")
     parser.add_argument("--seed", type=int, default=7)
     args = parser.parse_args(argv)
-    box, d_l, d_s, margin = (0.05, 0.05, 0.08), 1.5e-3, 0.5e-3, 2e-3
-    overrides = ["feed.mass_rate=0", "fulldem.cell_size=0.005", "fulldem.fluid_step=0.002", "coalescence.threshold=0",
-                 "coalescence.size_limit=5e-3", f"coalescence.mode={args.mode}", f"coalescence.trigger={args.trigger}"]
+    box, d_l, d_s = (0.05, 0.05, 0.08), 1.5e-3, 0.5e-3
+    extra = [f"coalescence.mode={args.mode}", f"coalescence.trigger={args.trigger}"]
     if args.growth_rate is not None:
-        overrides.append(f"coalescence.growth_rate={args.growth_rate}")
-    case = load_case("simple", overrides)
-    rng = np.random.default_rng(args.seed)
-    lo, hi = np.array([margin, margin, 0.005]), np.array(box) - margin
-    large = []
-    for p in rng.uniform([margin, margin, 0.05], hi, size=(10 * args.large, 3)):
-        if not large or np.min(np.linalg.norm(np.array(large) - p, axis=1)) > 1.05 * d_l:
-            large.append(p)
-        if len(large) == args.large:
-            break
-    small = rng.uniform(lo, hi, size=(3 * args.small, 3))
-    small = small[[not cKDTree(large).query_ball_point(p, 1.05 * (d_l + d_s) / 2) for p in small]]
-    crowded = {j for _, j in cKDTree(small).query_pairs(1.05 * d_s)}
-    small = np.array([p for k, p in enumerate(small) if k not in crowded])[: args.small]
-    store = DropletStore(2 * (len(large) + len(small)))
-    store.add(np.vstack([large, small]), np.r_[np.full(len(large), d_l), np.full(len(small), d_s)], 5100.0)
-    sim = Simulation(case, droplets=store, feed=False, box=(box, (0.0, 0.0, 0.0)))
+        extra.append(f"coalescence.growth_rate={args.growth_rate}")
+    sim, (lo, hi) = bidisperse_suspension(args.large, args.small, box, large_bottom=0.05, large_diameter=d_l,
+                                          small_diameter=d_s, seed=args.seed, extra=extra)
+    case = sim.case
+    n_large_placed = int((sim.store.diameter[: sim.store.count] == d_l).sum())
+    n_small_placed = sim.store.count - n_large_placed
     coalescence = next(m for m in sim.submodels if m.name == "coalescence")
     bin_l, bin_s = size_bin(d_l), size_bin(d_s)
     volume = float(np.prod(hi - lo))
@@ -77,7 +62,7 @@ def main(argv=None):
     got = int(sim.counters.merges_by_size[min(bin_l, bin_s), max(bin_l, bin_s)])
     marked = int(((sim.store.flags[: sim.store.count] & COALESCING) != 0).sum()) // 2
     print(f"mode {args.mode}, trigger {args.trigger}, growth_rate {case.coalescence.growth_rate} 1/s, "
-          f"{len(large)} x 1.5 mm through {len(small)} x 0.5 mm, {args.end_time:g} s: large-small merges {got}, "
+          f"{n_large_placed} x 1.5 mm through {n_small_placed} x 0.5 mm, {args.end_time:g} s: large-small merges {got}, "
           f"ballistic kernel {expected:.1f} ({got / expected - 1:+.1%}); all merges {sim.counters.merges}, pairs marked "
           f"{sim.counters.marks}, still marked {marked}; most pairs waiting past their growth time {waiting}, longest "
           f"marked {longest:.3f} s; wall {time.perf_counter() - start:.0f} s")

@@ -67,7 +67,8 @@ class Counters:
     """Matte mass bookkeeping [kg] and event counts since t = 0 (``recreated``: the stepped reaction's changes of
     material; ``marks``: pairs marked by the delayed coalescence; ``refused_size``: evaluated pairs refused because
     the merged droplet would exceed the size limit); ``merges_reported`` (``marks_reported``,
-    ``refused_reported``): ``merges`` (``marks``, ``refused_size``) at the last time-series row; ``merges_by_size``: merges by the size bins of the two droplets
+    ``refused_reported``): ``merges`` (``marks``, ``refused_size``) at the last time-series row;
+    ``merges_by_size``: merges by the size bins of the two droplets
     (:func:`fulldem.submodels.coalescence.size_bin`, smaller first)."""
 
     mass_fed: float = 0.0

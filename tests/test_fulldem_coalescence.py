@@ -14,6 +14,7 @@ import pytest
 
 from fulldem.dem import records
 from fulldem.dem import stepper as dem_stepper
+from fulldem.cases.bidisperse import bidisperse_suspension
 from fulldem.droplets import COALESCING, MERGED, DropletStore
 from fulldem.stepper import Simulation
 from fulldem.submodels.coalescence import SIZE_BINS, size_bin
@@ -182,37 +183,12 @@ def test_a_marked_pair_settling_at_different_speeds_merges_within_its_growth_tim
     assert step - marked_at <= growth_steps + 1
 
 
-def _bidisperse(mode, n_large=120, n_small=1500, box=(0.04, 0.04, 0.06), seed=7):
-    """A dilute suspension: ``n_large`` droplets of 1.5 mm in the upper part of a closed box, falling 5.5 mm/s
-    faster than ``n_small`` of 0.5 mm spread through it; every contact may merge (threshold 0, size limit 5 mm)."""
-    from scipy.spatial import cKDTree
-
-    case = load_case("simple", [*SMALL_BOX, "coalescence.threshold=0", "coalescence.size_limit=5e-3",
-                                f"coalescence.mode={mode}"])
-    rng = np.random.default_rng(seed)
-    large_d, small_d, margin = 1.5e-3, 0.5e-3, 2e-3
-    hi = np.array(box) - margin
-    large = []
-    for p in rng.uniform([margin, margin, 0.6 * box[2]], hi, size=(10 * n_large, 3)):
-        if not large or np.min(np.linalg.norm(np.array(large) - p, axis=1)) > 1.05 * large_d:
-            large.append(p)
-        if len(large) == n_large:
-            break
-    small = rng.uniform([margin, margin, 0.005], hi, size=(3 * n_small, 3))
-    small = small[[not cKDTree(large).query_ball_point(p, 1.05 * (large_d + small_d) / 2) for p in small]]
-    crowded = {j for _, j in cKDTree(small).query_pairs(1.05 * small_d)}
-    small = np.array([p for k, p in enumerate(small) if k not in crowded])[:n_small]
-    store = DropletStore(2 * (n_large + n_small))
-    store.add(np.vstack([large, small]), np.r_[np.full(n_large, large_d), np.full(len(small), small_d)], 5100.0)
-    return Simulation(case, droplets=store, feed=False, box=(box, (0.0, 0.0, 0.0)))
-
-
 def test_in_dilute_settling_no_marked_pair_waits_past_its_growth_time():
     """The regime of the channel: 1.5 mm droplets settling through 0.5 mm ones. Every pair the delayed merge marks
     merges within its growth time plus one fluid step (``pairs_waiting`` stays 0), so marks turn into merges at the
     rate they are made; before the draw followed the partners' differential settling, nearly every mark waited for
     the rest of the run (1 merge of 465 marks' worth in 3 s in the coalescence issue's report)."""
-    sim = _bidisperse("delayed")
+    sim, _ = bidisperse_suspension(120, 1500, (0.04, 0.04, 0.06), large_bottom=0.036)
     coalescence = next(m for m in sim.submodels if m.name == "coalescence")
     waiting = 0
     for _ in range(1500):  # 3 s

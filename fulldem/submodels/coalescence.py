@@ -91,6 +91,14 @@ SIZE_BINS = 10e-6 * 2.0 ** (np.arange(41) / 3.0)
 MODES = ("delayed", "instantaneous")
 
 
+def marked_pairs(store):
+    """The marked pairs of a store as index arrays (first, second), first < second, in index order."""
+    n = store.count
+    marked = np.flatnonzero((store.flags[:n] & COALESCING) != 0)
+    first = marked[store.partner[marked] > marked]
+    return first, store.partner[first]
+
+
 def size_bin(diameter):
     """Index of the merges-by-size bin of each diameter [m]: 0 below SIZE_BINS[0], len(SIZE_BINS) above the last."""
     return np.searchsorted(SIZE_BINS, np.asarray(diameter, dtype=float), side="right")
@@ -141,12 +149,10 @@ class Coalescence(Submodel):
         time plus one fluid step (grown, but not yet met: held apart by neighbours), and ``longest_marked`` [s], the
         longest any marked pair has been marked (0 without marked pairs; NaN for pairs marked before a resume from a
         checkpoint that did not time its marks)."""
-        s, n = sim.store, sim.store.count
-        marked = np.flatnonzero((s.flags[:n] & COALESCING) != 0)
-        first = marked[s.partner[marked] > marked]
+        s = sim.store
+        first, second = marked_pairs(s)
         if first.size == 0:
             return {"pairs_waiting": 0, "longest_marked": 0.0}
-        second = s.partner[first]
         merged = merged_diameter_v(s.diameter[first], s.diameter[second])
         small = np.minimum(s.diameter[first], s.diameter[second])
         growth_time = np.maximum(self.growth_target * merged - small, 0.0) / (self.growth_rate * merged)
@@ -158,14 +164,12 @@ class Coalescence(Submodel):
     def grow_and_merge(self, sim) -> None:
         """Grow every marked pair's contact diameters by one fluid step, draw the partners together at the pair's
         fixed speed (module docstring) and merge the pairs that are grown and have met."""
-        s, n = sim.store, sim.store.count
-        marked = np.flatnonzero((s.flags[:n] & COALESCING) != 0)
-        first = marked[s.partner[marked] > marked]
+        s = sim.store
+        first, second = marked_pairs(s)
         if first.size == 0:
             return
-        second = s.partner[first]
         # the step's drift velocities, while their rows are still the store's droplets
-        drifting = sim.drift_velocity if getattr(sim, "drift_version", -1) == s.version else None
+        drifting = sim.drift_velocity if sim.drift_version == s.version else None
         d_first, d_second = s.diameter[first], s.diameter[second]
         merged = merged_diameter_v(d_first, d_second)
         target = self.growth_target * merged
