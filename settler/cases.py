@@ -141,9 +141,10 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "mode": Field(S, "", "'delayed': marked pairs grow, then merge (seed paper); 'instantaneous': merge at first "
                              "contact (the paper's previous model, section 4.1; full engine).",
                       choices=("delayed", "instantaneous")),
-        "trigger": Field(S, "", "Which contacts are evaluated for coalescence: 'first_contact' (a pair's first contact "
-                                "only) or 'every_contact' (every free pair in contact at each fluid step, as the seed "
-                                "paper's section 3.3.1; full engine).", choices=("first_contact", "every_contact")),
+        "trigger": Field(S, "", "Which contacts are evaluated for coalescence: 'every_contact' (every free pair in "
+                                "contact at each fluid step, as the seed paper's section 3.3.1; the default) or "
+                                "'first_contact' (a pair's first contact only, the engine's rule before; full engine).",
+                         choices=("every_contact", "first_contact")),
     },
     "reaction": {
         "enabled": Field(B, "", "Reaction submodel (FeS removal: droplets shrink and densify) on or off."),
