@@ -55,7 +55,7 @@ from .submodels.base import submodels_for
 from .submodels.coalescence import empty_size_table, size_bin
 from .submodels.exits import classify_exits
 from .submodels.feed import draw_inlet_candidates, place_without_overlap
-from .tuning import SKIN_MIN, SORT_INTERVAL, skin_for
+from .tuning import SKIN_MIN, SORT_INTERVAL, PhaseTimes, skin_for
 
 
 #: Ratios sigma/h at which the grid's self-mobility factor is tabulated (see fulldem.coupling).
@@ -203,6 +203,7 @@ class Simulation:
         self.eps_old = None
         self.owed_force = self.grid.zeros_faces()  # -J deposited, applied in the next fluid step [N/m^3]
         self.last = StepDiagnostics()
+        self.phase_times = PhaseTimes()  # wall seconds per phase of the steps (fulldem.tuning.PhaseTimes)
         self._merges = []  # (first, second) index arrays proposed during the step, applied by apply_events
         self._work = {}  # work arrays of the filtered kernel, by (purpose, index)
         self._alloc(self.store.capacity)
@@ -389,8 +390,11 @@ class Simulation:
     def step(self):
         """Advance the coupled system by one fluid step dt (see the module docstring)."""
         fd = self.case.fulldem
+        lap = self.phase_times.lap
+        self.phase_times.start()
         for submodel in self.submodels:  # the start-of-step event point: the feed
             submodel.at_start(self)
+            lap(f"start: {submodel.name}")
         s = self.store
         self._ensure_capacity()
         if s.count and (not self.dem.ready or self.steps % SORT_INTERVAL == 0):
@@ -400,12 +404,14 @@ class Simulation:
             # droplets appended at the inlet (or moved into the holes of exits) would otherwise lie far in memory
             # from their neighbours, which cuts the parallel slabs of the DEM kernels to one (fulldem.dem.pairs.slab_count)
             s.reorder(self.dem.neighbours.spatial_order(s.position, s.diameter, s.count))
+        lap("sort")
         # the DEM is set up at the first step even without droplets (a run may start empty and feed later)
         rebuilt = not self.dem.ready
         if rebuilt:  # one list build per step for this step's insertions, the last one's exits and a sort
             self.dem.droplets_changed()  # computes the contact forces at this state too
         elif self.dem.sizes_stale:  # sizes changed in place at the last event point (growth, reaction)
             self.dem.sizes_changed()
+        lap("neighbour list and forces" if rebuilt else "contact sizes")
         n = s.count
         inv_cell_volume = 1.0 / self.grid.cell_volume
 
@@ -421,10 +427,11 @@ class Simulation:
         eps_faces = [np.subtract(1.0, f, out=f) for f in faces]
         if min(float(e.min()) for e in eps_faces) <= 0.0:
             raise FloatingPointError("void fraction reached zero on a face: droplets overfill a cell")
+        lap("deposit volume")
         state, fdiag = solver.step(self.grid, self.fluid, self.boundary, self.density, self.viscosity, self.dt,
                                eps_faces=eps_faces, particle_flux=flux, force=self.owed_force,
                                body_force=self.body_force, eps_faces_old=self.eps_old,
-                               advection="koren" if fd.advection else "none")
+                               advection="koren" if fd.advection else "none", timer=self.phase_times)
         self.fluid = state
         self.eps_old = eps_faces
         self.momentum_eps = eps_faces
@@ -435,6 +442,7 @@ class Simulation:
         seen = self.interpolated
         self.interpolate_many(s.position, (state.u, state.v, state.w, *pressure_force, phi_cells),
                               INTERPOLATE_COMPONENTS, seen, self.own, smoothing.LOAD)
+        lap("interpolate")
         eps_around = self.eps_around
         forcing_rows(seen, self.own, volume, self.mass, self.density, self.gravity, inv_cell_volume, n,
                      self.fluid_velocity, self.external, eps_around)
@@ -449,11 +457,13 @@ class Simulation:
         # fused); its drag impulse then includes F h per sub-step, subtracted below
         drift_rows(self.fluid_velocity, self.external, self.beta, n, self.drift_velocity, self.impulse)
         self.dem.set_drag(self.beta)
+        lap("drag")
         # forces at the step's start: those of the rebuild above, or recomputed (the last sub-step's kick changed the
         # velocities, hence the dashpot forces, after its forces were computed)
         at_start = self.dem.max_overlap_ratio if rebuilt else self.dem.compute_forces()
         self.dem.advance(self.substeps, self.drift_velocity, self.impulse)
         self.drift_version = s.version  # drift_velocity's rows are the store's droplets while this holds
+        lap("dem")
         worst = max(at_start, self.dem.peak_overlap_ratio)
         # ... and the fluid is owed -J, deposited where the droplets felt the fluid
         owed_rows(self.impulse, self.external, self.substeps * self.dem_step, n, -inv_cell_volume / self.dt, values)
@@ -462,6 +472,7 @@ class Simulation:
                                "droplet set may change only at the step's event points (see the module docstring)")
         self.owed_force = self.deposit_many(self.start_position, values[:3], INTERPOLATE_COMPONENTS[:3],
                                             [np.zeros(self.grid.face_shape(a)) for a in range(3)], smoothing.LOAD)
+        lap("deposit drag")
         self.time += self.dt
         self.steps += 1
         self.apply_events()
@@ -474,6 +485,7 @@ class Simulation:
         if worst > fd.overlap_abort:
             raise FloatingPointError(f"runaway overlap: {worst:.3f} of a diameter at t = {self.time:.6g} s "
                                      f"(fulldem.overlap_abort = {fd.overlap_abort})")
+        lap("checks")
         return self.last
 
     def propose_merges(self, first, second):
@@ -486,6 +498,7 @@ class Simulation:
         (:func:`fulldem.submodels.base.submodels_for`: merges, the case's submodels, exits)."""
         for submodel in self.submodels:
             submodel.at_end(self)
+            self.phase_times.lap(f"end: {submodel.name}")
 
     def apply_merges(self):
         """Merge the pairs proposed during the step, in a fixed order (by the pair's lower ident, so a run does not

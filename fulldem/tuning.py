@@ -96,3 +96,33 @@ class ThreadChoice:
             return order
         finally:
             numba.set_num_threads(threads)
+
+
+class PhaseTimes:
+    """Wall seconds spent in each named phase of the fluid steps, summed over the steps since :meth:`reset`.
+
+    The stepper calls :meth:`start` as a step begins and :meth:`lap` as each phase ends, so the phases of a step sum
+    to its wall time (less the few microseconds between the step's call and :meth:`start`); a phase's name is what
+    ran since the previous lap. The compiled kernels return only when done, so a lap after one times it. Read by
+    ``benchmarks/bench_steady.py``; costs two clock reads per phase."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self.steps = 0
+        self._last = 0.0
+
+    def start(self):
+        self._last = time.perf_counter()
+        self.steps += 1
+
+    def lap(self, name):
+        now = time.perf_counter()
+        self.seconds[name] = self.seconds.get(name, 0.0) + (now - self._last)
+        self._last = now
+
+    def reset(self):
+        self.seconds, self.steps = {}, 0
+
+    def total(self) -> float:
+        """Sum of the phases [s]."""
+        return float(sum(self.seconds.values()))

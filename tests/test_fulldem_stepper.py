@@ -115,3 +115,26 @@ def test_mass_accounting_with_feed_and_exits():
     balance = fed - sim.mass_in_slag() - c.mass_settled - c.mass_lost
     assert abs(balance) <= 1e-12 * fed
     assert c.fed > 10 and c.settled >= 1 and c.lost >= 1
+
+
+def test_phase_timers_cover_the_whole_step():
+    """Simulation.phase_times names every part of a step: the phases sum to the step's wall time within 5 %
+    (what benchmarks/bench_steady.py promises), the fluid's stages included."""
+    import time
+
+    case = load_case("cubic", ["geometry.height=0.04", "geometry.width=0.04", "geometry.depth=0.04",
+                               "geometry.inlet_diameter=0.03", "feed.mass_rate=1e-3", "feed.mean_diameter=1e-3",
+                               "fulldem.cell_size=0.004", "fulldem.fluid_step=0.004"])
+    sim = Simulation(case)
+    for _ in range(5):  # compilation out of the timed steps
+        sim.step()
+    sim.phase_times.reset()
+    wall = 0.0
+    for _ in range(20):
+        t0 = time.perf_counter()
+        sim.step()
+        wall += time.perf_counter() - t0
+    phases = sim.phase_times
+    assert phases.steps == 20
+    assert {"dem", "fluid: pressure", "fluid: momentum", "deposit volume", "interpolate", "sort"} <= set(phases.seconds)
+    assert abs(phases.total() - wall) <= 0.05 * wall

@@ -153,7 +153,7 @@ def _momentum_rhs(grid, work, velocity, eps, nu, scheme):
 
 def step(grid, state, boundary, density, viscosity, dt, eps_faces=None, eps_cells=None, particle_flux=None,
          source=None, force=None, body_force=(0.0, 0.0, 0.0), *, eps_faces_old=None, advection="koren",
-         pressure_tolerance=1e-12, max_iterations=200):
+         pressure_tolerance=1e-12, max_iterations=200, timer=None):
     """Advance the fluid by dt [s]; returns (new :class:`FluidState`, :class:`FluidDiagnostics`).
 
     grid: :class:`fulldem.fluid.grid.Grid`; boundary: from :func:`make_boundary`; density [kg/m^3]; viscosity [Pa s];
@@ -163,9 +163,11 @@ def step(grid, state, boundary, density, viscosity, dt, eps_faces=None, eps_cell
     particle_flux: (qx, qy, qz) particle volume flux on faces [m/s] (None: 0); source: (nx, ny, nz) mixture volume
     source [1/s] (None: 0); force: (fx, fy, fz) face force density on the fluid [N/m^3] (None: 0); body_force:
     uniform mean pressure gradient -grad P_mean [N/m^3], acting as eps b; advection: a key of
-    :data:`ADVECTION_SCHEMES`; pressure_tolerance: relative CG residual. On periodic axes the first face's value
-    of every face input is used for the last face too.
+    :data:`ADVECTION_SCHEMES`; pressure_tolerance: relative CG residual; timer: a
+    :class:`fulldem.tuning.PhaseTimes` whose ``lap`` is called after each part ("fluid: ..." phases), or None. On
+    periodic axes the first face's value of every face input is used for the last face too.
     """
+    lap = timer.lap if timer is not None else _no_lap
     del eps_cells  # see the docstring: the discretisation needs void fractions on faces only
     if advection not in ADVECTION_SCHEMES:
         raise ValueError(f"fluid.step: advection {advection!r} is not one of {sorted(ADVECTION_SCHEMES)}")
@@ -193,6 +195,7 @@ def step(grid, state, boundary, density, viscosity, dt, eps_faces=None, eps_cell
     _copy_periodic_faces(start, grid.periodic)
     _apply_wall_values(start, wall_values)
     momentum_start = [eps_old[a] * start[a] for a in range(3)]
+    lap("fluid: set-up")
 
     def projected(velocity, guess):
         _copy_periodic_faces(velocity, grid.periodic)
@@ -204,12 +207,16 @@ def step(grid, state, boundary, density, viscosity, dt, eps_faces=None, eps_cell
     rhs = _momentum_rhs(grid, work, start, eps, nu, scheme)
     first = [(momentum_start[a] + dt * (rhs[a] + forcing[a])) / eps[a] for a in range(3)]
     guess = state.p / density if np.any(state.p) else None
+    lap("fluid: momentum")
     stage1 = projected(first, guess)
+    lap("fluid: pressure")
     # Stage 2: the SSP-RK2 average, projected; half of stage 1's correction is already in it, so phi_2 ~ phi_1 / 2.
     rhs = _momentum_rhs(grid, work, first, eps, nu, scheme)
     second = [(0.5 * momentum_start[a] + 0.5 * (eps[a] * first[a] + dt * (rhs[a] + forcing[a]))) / eps[a]
               for a in range(3)]
+    lap("fluid: momentum")
     stage2 = projected(second, 0.5 * stage1.phi)
+    lap("fluid: pressure")
 
     pressure_field = density * (0.5 * stage1.phi + stage2.phi)
     divergence = np.empty(grid.shape)
@@ -227,7 +234,12 @@ def step(grid, state, boundary, density, viscosity, dt, eps_faces=None, eps_cell
         inflow_flux=inflow,
         outflow_flux=outflow,
     )
+    lap("fluid: diagnostics")
     return FluidState(second[0], second[1], second[2], pressure_field), diagnostics
+
+
+def _no_lap(name):
+    """The timer of an untimed step."""
 
 
 def stable_dt(grid, state, density, viscosity, cfl=0.5) -> float:
