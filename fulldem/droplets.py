@@ -124,21 +124,12 @@ class DropletStore:
         keep = ~np.asarray(mask, dtype=bool)
         if keep.all():
             return
-        new_index = np.cumsum(keep) - 1
-        new_index[~keep] = -1
-        n = int(keep.sum())
-        partner = self.partner[: self.count].copy()
-        for name in FIELDS:
+        count = self.count
+        for name in FIELDS:  # compacted in place, in order, by a compiled loop (a NumPy mask copies each field twice)
             arr = getattr(self, name)
-            arr[:n] = arr[: self.count][keep]
-        valid = partner[keep] >= 0
-        remapped = np.full(n, -1, dtype=np.int64)
-        remapped[valid] = new_index[partner[keep][valid]]
-        self.partner[:n] = remapped
-        lost_partner = (self.partner[:n] < 0) & ((self.flags[:n] & COALESCING) != 0)
-        self.flags[:n][lost_partner] &= ~np.int32(COALESCING)
-        self.contact_diameter[:n][lost_partner] = self.diameter[:n][lost_partner]
-        self.partner[n: self.count] = -1
+            (_compact_1d if arr.ndim == 1 else _compact_2d)(arr, keep, count)
+        n = _remap_partners(self.partner, self.flags, self.contact_diameter, self.diameter, keep, count)
+        self.partner[n:count] = -1
         self.count = n
         self.version += 1
 
@@ -296,6 +287,49 @@ class DropletStore:
     def mass(self) -> np.ndarray:
         """Masses of the live droplets [kg]."""
         return self.density[: self.count] * self.volume()
+
+
+@njit(cache=True)
+def _compact_1d(array, keep, count):
+    """array[:n] = array[:count][keep], in place (each row moves down or stays, so the order is kept)."""
+    write = 0
+    for p in range(count):
+        if keep[p]:
+            array[write] = array[p]
+            write += 1
+
+
+@njit(cache=True)
+def _compact_2d(array, keep, count):
+    """The rows of a 2-D array: array[:n] = array[:count][keep], in place."""
+    write = 0
+    for p in range(count):
+        if keep[p]:
+            for a in range(array.shape[1]):
+                array[write, a] = array[p, a]
+            write += 1
+
+
+@njit(cache=True)
+def _remap_partners(partner, flags, contact_diameter, diameter, keep, count):
+    """After the fields were compacted (partner[:n] still holding old indices): point each partner to its new index,
+    -1 where the partner was removed; a droplet marked COALESCING without a partner loses the mark and its grown
+    size. Returns n, the droplets kept."""
+    new_index = np.empty(count, dtype=np.int64)
+    n = 0
+    for p in range(count):
+        if keep[p]:
+            new_index[p] = n
+            n += 1
+        else:
+            new_index[p] = -1
+    for p in range(n):
+        q = partner[p]
+        partner[p] = new_index[q] if q >= 0 else -1
+        if partner[p] < 0 and (flags[p] & COALESCING) != 0:
+            flags[p] &= ~np.int32(COALESCING)
+            contact_diameter[p] = diameter[p]
+    return n
 
 
 @njit(cache=True, parallel=True)

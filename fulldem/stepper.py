@@ -379,11 +379,11 @@ class Simulation:
         if leaving == 0:
             return
         code = self.exit_code[:n]
-        mass = sphere_mass(s.diameter[:n], s.density[:n])
-        self.counters.mass_settled += float(mass[code == 1].sum())
-        self.counters.mass_lost += float(mass[code == 2].sum())
-        self.counters.settled += int((code == 1).sum())
-        self.counters.lost += int((code == 2).sum())
+        settled, lost = np.flatnonzero(code == 1), np.flatnonzero(code == 2)  # the masses of the leaving only
+        self.counters.mass_settled += float(sphere_mass(s.diameter[settled], s.density[settled]).sum())
+        self.counters.mass_lost += float(sphere_mass(s.diameter[lost], s.density[lost]).sum())
+        self.counters.settled += settled.size
+        self.counters.lost += lost.size
         s.remove(code > 0)
 
     # ------------------------------------------------------------------------------------------------ the step

@@ -161,3 +161,33 @@ def test_submodels_act_at_the_step_event_points():
     assert recorder.seen == [("start", 0.0), ("end", pytest.approx(sim.dt))]
     assert sim.store.count == 1 and sim.store.velocity[0, 2] < 0.0  # it settled during the step it was added in
 
+
+
+def test_remove_keeps_order_and_partners_by_identity():
+    """Removal (a compiled in-place compaction) keeps the survivors in order with every field, re-points each
+    partner to the same droplet (by ident), and unmarks a droplet whose partner left, giving back its true size."""
+    rng = np.random.default_rng(7)
+    n = 2000
+    s = fdrop.DropletStore(16)
+    s.add(rng.uniform(0.0, 0.1, (n, 3)), rng.uniform(2e-4, 1e-3, n), 5000.0, velocity=rng.normal(size=(n, 3)),
+          age=rng.random(n))
+    pairs = rng.permutation(n)[:1200].reshape(2, -1)
+    s.mark_pairs(pairs[0], pairs[1], 0.25)
+    s.contact_diameter[:n] = 1.2 * s.diameter[:n]
+    before = {name: getattr(s, name)[:n].copy() for name in fdrop.FIELDS}
+    partner_ident = np.where(before["partner"] >= 0, before["ident"][before["partner"]], -1)
+    gone = rng.random(n) < 0.3
+    s.remove(gone)
+    kept = ~gone
+    assert s.count == kept.sum()
+    for name in ("position", "velocity", "diameter", "age", "ident", "marked_time"):
+        np.testing.assert_array_equal(getattr(s, name)[: s.count], before[name][kept], err_msg=name)
+    ident = s.ident[: s.count]
+    has = s.partner[: s.count] >= 0
+    np.testing.assert_array_equal(ident[s.partner[: s.count][has]], partner_ident[kept][has])
+    lost = (partner_ident[kept] >= 0) & ~np.isin(partner_ident[kept], ident)
+    assert lost.sum() > 50 and not has[lost].any()
+    assert not (s.flags[: s.count][lost] & fdrop.COALESCING).any()
+    np.testing.assert_array_equal(s.contact_diameter[: s.count][lost], s.diameter[: s.count][lost])
+    np.testing.assert_array_equal(s.contact_diameter[: s.count][has], 1.2 * s.diameter[: s.count][has])
+    assert (s.partner[s.count: n] == -1).all()
