@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from numba import njit
+from numba import njit, prange
 
 
 #: Ghost layers on each side of the padded work arrays (the reconstructions reach two faces upwind).
@@ -119,7 +119,7 @@ def fill_ghosts_kernel(padded, component, nx, ny, nz, px, py, pz):
             _copy_slab(padded, axis, g + PAD, src + PAD, sign)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def momentum_rhs_kernel(component, vel, flux_x, flux_y, flux_z, nx, ny, nz, spacing, nu, px, py, pz, scheme, out):
     """out = -div(eps u u_c) + nu lap u_c [m/s^2] on the faces of component c whose velocity is free.
 
@@ -132,7 +132,7 @@ def momentum_rhs_kernel(component, vel, flux_x, flux_y, flux_z, nx, ny, nz, spac
     lo1 = 1 if (c == 1 and not py) else 0
     lo2 = 1 if (c == 2 and not pz) else 0
     viscous = nu / (spacing * spacing)
-    for i in range(lo0, nx):
+    for i in prange(lo0, nx):  # each face written once: threads change no sum
         for j in range(lo1, ny):
             for k in range(lo2, nz):
                 a, b, e = i + PAD, j + PAD, k + PAD
@@ -167,7 +167,7 @@ def momentum_rhs_kernel(component, vel, flux_x, flux_y, flux_z, nx, ny, nz, spac
                          scheme, inv_h)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _advect_pass(out, vel, carrier_flux, f0, f1, f2, di, dj, dk, s0, s1, s2, e0, e1, e2, lo0, lo1, lo2, nx, ny, nz,
                  scheme, inv_h):
     """Advective fluxes through the control-volume faces normal to one axis (unit offset (di, dj, dk)), each
@@ -177,22 +177,37 @@ def _advect_pass(out, vel, carrier_flux, f0, f1, f2, di, dj, dk, s0, s1, s2, e0,
     and (di, dj, dk) from the control volume's own padded index; the carried velocity is reconstructed
     upwind-biased. Control volumes with index >= (lo0, lo1, lo2) and < (nx, ny, nz) receive the fluxes.
     """
-    for i in range(s0, e0):
-        for j in range(s1, e1):
-            for k in range(s2, e2):
-                a, b, e = i + PAD, j + PAD, k + PAD
-                carrier = 0.5 * (carrier_flux[a + f0, b + f1, e + f2] + carrier_flux[a + di, b + dj, e + dk])
-                if carrier >= 0.0:
-                    value = face_value(vel[a - di, b - dj, e - dk], vel[a, b, e], vel[a + di, b + dj, e + dk],
-                                       scheme)
-                else:
-                    value = face_value(vel[a + 2 * di, b + 2 * dj, e + 2 * dk], vel[a + di, b + dj, e + dk],
-                                       vel[a, b, e], scheme)
-                flux = carrier * value * inv_h
-                if i >= lo0 and j >= lo1 and k >= lo2:
-                    out[i, j, k] -= flux
-                if i + di < nx and j + dj < ny and k + dk < nz:
-                    out[i + di, j + dj, k + dk] += flux
+    # in parallel over slabs across the pass's axis: a slab's fluxes reach only its own control volumes, each of
+    # which receives them in the serial order (the lower face's first), so the sums are those of one thread
+    if di == 0:
+        for i in prange(s0, e0):
+            for j in range(s1, e1):
+                for k in range(s2, e2):
+                    _advect_face(out, vel, carrier_flux, i, j, k, f0, f1, f2, di, dj, dk, lo0, lo1, lo2, nx, ny, nz,
+                                 scheme, inv_h)
+    else:
+        for j in prange(s1, e1):
+            for i in range(s0, e0):
+                for k in range(s2, e2):
+                    _advect_face(out, vel, carrier_flux, i, j, k, f0, f1, f2, di, dj, dk, lo0, lo1, lo2, nx, ny, nz,
+                                 scheme, inv_h)
+
+
+@njit(cache=True, inline="always")
+def _advect_face(out, vel, carrier_flux, i, j, k, f0, f1, f2, di, dj, dk, lo0, lo1, lo2, nx, ny, nz, scheme, inv_h):
+    """The advective flux through one control-volume face (upper face of control volume (i, j, k) along the pass's
+    axis), given to both neighbours."""
+    a, b, e = i + PAD, j + PAD, k + PAD
+    carrier = 0.5 * (carrier_flux[a + f0, b + f1, e + f2] + carrier_flux[a + di, b + dj, e + dk])
+    if carrier >= 0.0:
+        value = face_value(vel[a - di, b - dj, e - dk], vel[a, b, e], vel[a + di, b + dj, e + dk], scheme)
+    else:
+        value = face_value(vel[a + 2 * di, b + 2 * dj, e + 2 * dk], vel[a + di, b + dj, e + dk], vel[a, b, e], scheme)
+    flux = carrier * value * inv_h
+    if i >= lo0 and j >= lo1 and k >= lo2:
+        out[i, j, k] -= flux
+    if i + di < nx and j + dj < ny and k + dk < nz:
+        out[i + di, j + dj, k + dk] += flux
 
 
 @njit(cache=True)

@@ -28,7 +28,7 @@ import functools
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from scipy import fft as sfft
 
 
@@ -36,12 +36,12 @@ from scipy import fft as sfft
 FFT_WORKERS = 2
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def mixture_divergence_kernel(u, v, w, ex, ey, ez, qx, qy, qz, source, spacing, out):
     """out = div(eps u + q) - s per cell [1/s]; face arrays in the grid layout (periodic: face n equals face 0)."""
     nx, ny, nz = out.shape
     inv_h = 1.0 / spacing
-    for i in range(nx):
+    for i in prange(nx):  # each entry written by one iteration: threads change no result
         for j in range(ny):
             for k in range(nz):
                 flux = (ex[i + 1, j, k] * u[i + 1, j, k] + qx[i + 1, j, k]
@@ -53,12 +53,12 @@ def mixture_divergence_kernel(u, v, w, ex, ey, ez, qx, qy, qz, source, spacing, 
                 out[i, j, k] = flux * inv_h - source[i, j, k]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def apply_operator_kernel(phi, ex, ey, ez, spacing, px, py, pz, out):
     """out = -div(eps grad phi) [phi / m^2]; no flux through wall faces, periodic axes wrap (face n = face 0)."""
     nx, ny, nz = phi.shape
     inv_h2 = 1.0 / (spacing * spacing)
-    for i in range(nx):
+    for i in prange(nx):  # each entry written by one iteration: threads change no result
         for j in range(ny):
             for k in range(nz):
                 c = phi[i, j, k]
@@ -90,13 +90,13 @@ def apply_operator_kernel(phi, ex, ey, ez, spacing, px, py, pz, out):
                 out[i, j, k] = -acc * inv_h2
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def subtract_gradient_kernel(u, v, w, phi, scale, spacing, px, py, pz):
     """u -= scale * grad(phi) on the faces where the velocity is free: interior faces and, on periodic axes,
     face 0 (then copied to face n). Wall faces are left alone (their velocity is imposed)."""
     nx, ny, nz = phi.shape
     c = scale / spacing
-    for i in range(nx):
+    for i in prange(nx):  # each entry written by one iteration: threads change no result
         for j in range(ny):
             for k in range(nz):
                 if i > 0:
@@ -137,10 +137,10 @@ def cg_update_kernel(phi, residual, direction, operator_direction, alpha):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def cg_direction_kernel(direction, preconditioned, beta):
     """p = z + beta p (flat arrays)."""
-    for n in range(direction.size):
+    for n in prange(direction.size):
         direction[n] = preconditioned[n] + beta * direction[n]
 
 
