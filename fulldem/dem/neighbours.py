@@ -41,6 +41,9 @@ AXIS_SWITCH = 0.8
 #: Smallest row width of the one-pass scan's scratch array (partners of one droplet among the small ones).
 MIN_ROW_STRIDE = 8
 
+#: Chunks of the parallel bounding box (a few per thread; below 16 droplets a chunk, one).
+BOX_CHUNKS = 8
+
 
 def cell_size_for(diameter, skin, quantile=0.99, cap=None) -> float:
     """Cell side [m] for binning: the ``quantile`` of the diameters [m] (at most ``cap`` [m]) plus the skin [m].
@@ -71,16 +74,39 @@ def _axis_range(cell, reach, ncell, periodic):
     return max(0, cell - reach), min(ncell - 1, cell + reach), False
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def bounding_box(position, count):
-    """Lowest and highest coordinates (3,), (3,) [m] of the first ``count`` droplets (one pass)."""
+    """Lowest and highest coordinates (3,), (3,) [m] of the first ``count`` droplets (one pass, in parallel chunks:
+    a minimum does not depend on the order it is taken in)."""
+    chunks = BOX_CHUNKS if count >= 16 * BOX_CHUNKS else 1
+    lows = np.full((chunks, 3), np.inf)
+    highs = np.full((chunks, 3), -np.inf)
+    for c in prange(chunks):
+        for p in range(c * count // chunks, (c + 1) * count // chunks):
+            for a in range(3):
+                lows[c, a] = min(lows[c, a], position[p, a])
+                highs[c, a] = max(highs[c, a], position[p, a])
     low = np.full(3, np.inf)
     high = np.full(3, -np.inf)
-    for p in range(count):
+    for c in range(chunks):
         for a in range(3):
-            low[a] = min(low[a], position[p, a])
-            high[a] = max(high[a], position[p, a])
+            low[a] = min(low[a], lows[c, a])
+            high[a] = max(high[a], highs[c, a])
     return low, high
+
+
+@njit(cache=True)
+def fullest_slabs(cell_xyz, count, shape):
+    """The most droplets in one slab of cells across each column of ``cell_xyz`` (column k: cell coordinates along
+    an axis with ``shape[k]`` cells), (3,) int64, in one pass."""
+    histogram = np.zeros((3, max(shape[0], shape[1], shape[2])), dtype=np.int64)
+    for p in range(count):
+        for k in range(3):
+            histogram[k, cell_xyz[p, k]] += 1
+    most = np.zeros(3, dtype=np.int64)
+    for k in range(3):
+        most[k] = histogram[k].max()
+    return most
 
 
 @njit(cache=True, parallel=True)
@@ -450,9 +476,8 @@ class NeighbourList:
         self._bin(position, count)
         if count == 0:
             return np.zeros(0, dtype=np.int64)
-        cell_xyz = self._cell_xyz[:count]
-        fullest = {int(self.axes[k]): np.bincount(cell_xyz[:, k], minlength=int(self.shape[self.axes[k]])).max()
-                   for k in range(3)}
+        slabs = fullest_slabs(self._cell_xyz, count, self.shape[self.axes])
+        fullest = {int(self.axes[k]): int(slabs[k]) for k in range(3)}
         current = int(self.axes[2])
         slowest = min(fullest, key=fullest.get)
         if fullest[slowest] < AXIS_SWITCH * fullest[current]:
