@@ -40,8 +40,11 @@ def main(args) -> int:
     from . import run, setup
     from .driver import check_run
 
-    model = setup(args.case, args.overrides)
-    warn_implausible(model.case, "reduced")
+    from settler.cases import case_with_overrides
+
+    case = case_with_overrides(args.case, args.overrides)
+    warn_implausible(case, "reduced")  # before the model is built: its closures may overflow on such a value
+    model = setup(case)
     prepare_output_folder(args.out, overwrite=args.overwrite, create=False)  # refused before the run, created after
     progress = False if args.quiet else args.progress
     try:

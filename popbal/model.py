@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from settler.cases import Case, CaseError, case_with_overrides
-from settler.derived import Quantity, settling_velocity
+from settler.derived import Quantity, plausibility_warnings, settling_velocity
 from settler.physics import (COALESCENCE_RULES, PROBABILITY_FORMS, STANDARD_GRAVITY, density_at_age, droplet_rate,
                              relative_diameter_at_age, scale_factor_pdf)
 
@@ -97,7 +98,13 @@ def setup(case: str | os.PathLike | Case, overrides: dict | list | None = None, 
     Raises :class:`settler.cases.CaseError` naming the key, the value and what is allowed.
     """
     case = case_with_overrides(case, overrides, **keyword_overrides)
-    return build(case)
+    try:
+        return build(case)
+    except (ZeroDivisionError, OverflowError) as exc:
+        # a value far outside what the closures were made for (settler.derived.plausibility_warnings names it)
+        outside = [m.group(1) for w in plausibility_warnings(case) if (m := re.search(r"(\w+\.\w+ = [^:]+)", w))]
+        raise CaseError(f"the reduced model's closures overflow for this case ({exc}); outside the range the laws "
+                        f"were made for: {', '.join(outside) or 'nothing'}") from exc
 
 
 def build(case: Case) -> Model:

@@ -119,3 +119,16 @@ def test_a_closed_pipe_stops_quietly(monkeypatch, capsys):
     monkeypatch.setattr(sys, "stdout", ClosedPipe())
     assert main(["info", "simple"]) == 141
     assert capsys.readouterr().err == ""
+
+
+def test_an_implausible_viscosity_is_warned_about_and_refused_in_one_line_where_the_reduced_model_overflows(
+        capsys, tmp_path):
+    """The README's promise for values far outside what the laws were made for: the warning names the value; where
+    popbal's closures overflow on it (a 1e-300 Pa s slag: the plume Reynolds number is infinite) the run is refused
+    in one line naming the key (exit 2), not stopped by an internal ZeroDivisionError (exit 1)."""
+    out = tmp_path / "r"
+    assert main(["reduced", "simple", "slag.viscosity_reference=1e-300", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert any("warning" in line and "1e-300 Pa s" in line for line in err)
+    assert err[-1].startswith("settler reduced: error:") and "slag.viscosity_reference = 1e-300" in err[-1]
+    assert "internal error" not in "\n".join(err) and not out.exists()
