@@ -17,6 +17,7 @@ they come on top), and compilation (the first step compiles where no cache exist
     python benchmarks/bench_steady.py                      # simple, 2 threads: about 5 minutes on 2 cores
     python benchmarks/bench_steady.py --case deep --threads 2
     python benchmarks/bench_steady.py --warmup 300 --steps 50 --override coalescence.trigger=first_contact
+    python benchmarks/bench_steady.py --warmup 700 --steps 300 --skin-max 2   # inside the fast window, a wider skin
 
 The machine is shared and noisy: compare figures of one sitting, and read the load average printed at the end.
 """
@@ -33,6 +34,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+import fulldem.tuning
 from fulldem.droplets import COALESCING, MERGED, DropletStore
 from fulldem.stepper import Simulation
 from settler.cases import load_case
@@ -122,12 +124,21 @@ def main(argv=None):
     parser.add_argument("--steps", type=int, default=150, help="timed fluid steps (default 150)")
     parser.add_argument("--threads", type=int, default=2, help="Numba threads (default 2)")
     parser.add_argument("--override", action="append", default=[], help="KEY=VALUE for the case (repeatable)")
+    parser.add_argument("--skin-max", type=float, default=None,
+                        help="what-if: the neighbour-list skin's cap in feed diameters (fulldem.tuning.SKIN_MAX, "
+                             f"default {fulldem.tuning.SKIN_MAX:g}); changes results at round-off and free flight's "
+                             "choices, so it is a measurement, not a setting")
     args = parser.parse_args(argv)
+    if args.skin_max is not None:
+        if not args.skin_max >= fulldem.tuning.SKIN_MIN:
+            parser.error(f"--skin-max {args.skin_max}: must be at least SKIN_MIN = {fulldem.tuning.SKIN_MIN:g}")
+        fulldem.tuning.SKIN_MAX = args.skin_max  # read by fulldem.tuning.skin_for at each sort
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
 
     sim, t_snapshot = steady_simulation(args.case, args.override)
     print(f"{args.case}: {sim.store.count} droplets from the snapshot at t = {t_snapshot:g} s, grid "
-          f"{tuple(sim.grid.shape)}, dt {sim.dt:g} s, {sim.substeps} DEM sub-steps, {numba.get_num_threads()} threads")
+          f"{tuple(sim.grid.shape)}, dt {sim.dt:g} s, {sim.substeps} DEM sub-steps, {numba.get_num_threads()} threads, "
+          f"skin cap {fulldem.tuning.SKIN_MAX:g} feed diameters")
     start = time.perf_counter()
     warm = warm_up(sim, args.warmup, args.settle, args.max_warmup)
     speed_warm = slag_speed(sim)
