@@ -318,7 +318,7 @@ def check_run(model: Model, end_time: float | None = None, output_interval: floa
     the case's popbal.end_time / popbal.output_interval).
 
     Refuses with ValueError an argument that is not a finite number > 0, and with settler.cases.CaseError a run
-    whose outputs or arrays exceed popbal.limits (MAX_OUTPUTS, memory_limit()). ``names`` name the two arguments in
+    whose outputs, time steps or arrays exceed popbal.limits (MAX_OUTPUTS, MAX_STEPS, memory_limit()). ``names`` name the two arguments in
     the messages (the command line passes its options, ``--end-time`` and ``--output-interval``).
     """
     p = model.case.popbal
@@ -333,6 +333,7 @@ def check_run(model: Model, end_time: float | None = None, output_interval: floa
     else:
         interval = _seconds(interval_name, output_interval)
     outputs = limits.check_outputs(stop, interval, interval_name, end_name, end_value)
+    limits.check_steps(stop, model.parameters["time_step"], end_name, end_value)
     limits.check(model.cells, p.sections_per_doubling, model.grid.size, outputs, model.velocity_table.shape[1],
                  model.parameters["speed_limit"].size > 0, interval_name, interval)
     return stop, interval, outputs

@@ -35,6 +35,11 @@ from settler.output import PROFILE_BANDS
 #: Most outputs (time-series rows and distribution snapshots) a run may write; the presets write 61 to 73.
 MAX_OUTPUTS = 100_000
 
+#: Most time steps a run may take, by its lower bound (run length / popbal.time_step): at the simple preset's 0.35 ms
+#: per step (1 200 steps in 0.42 s, measured 2026-12-03 on the 2-core machine) 1e7 steps are about an hour; the
+#: presets take 1 200-1 500. More is almost always a typo (popbal.time_step = 1e-9 s: 6e10 steps, months).
+MAX_STEPS = 10_000_000
+
 #: Upper bound of the memory limit [bytes], and the fraction of physical memory it takes.
 MEMORY_CAP = 16e9
 MEMORY_FRACTION = 0.25
@@ -150,6 +155,18 @@ def check_outputs(stop: float, interval: float, interval_name: str, end_name: st
                         f"{count_text(count)} outputs, allowed at most {MAX_OUTPUTS} (an interval >= "
                         f"{stop / (MAX_OUTPUTS - 1):.4g} s)")
     return count
+
+
+def check_steps(stop: float, time_step: float, end_name: str, end_value) -> float:
+    """The least number of time steps of a run (stop / popbal.time_step; the Courant limit may add more); CaseError
+    if more than MAX_STEPS."""
+    steps = stop / time_step
+    if steps > MAX_STEPS:
+        over = f" (run length {stop:g} s)" if end_value is not None and stop != end_value else ""
+        raise CaseError(f"popbal.time_step = {time_step!r} s with {end_name} = {end_value!r} s{over}: at least "
+                        f"{count_text(steps)} time steps, allowed at most {MAX_STEPS} (a time step >= "
+                        f"{stop / MAX_STEPS:.4g} s)")
+    return steps
 
 
 def check(cells, sections_per_doubling, sections: float, outputs: float, ages: int, speed_table: bool,

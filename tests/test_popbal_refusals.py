@@ -160,3 +160,16 @@ def test_horizontal_run_refuses_an_infinite_end_time():
     model = popbal.setup("furnace", popbal__height_cells=4, popbal__sections_per_doubling=1)
     with pytest.raises(ValueError, match=r"^end_time = inf s"):
         popbal.run(model, end_time=math.inf)
+
+
+def test_a_run_of_months_of_time_steps_is_refused_before_it_starts(capsys, tmp_path):
+    """popbal.time_step = 1e-9 s over the simple preset's 60 s is at least 6e10 steps (months at the preset's 0.35 ms
+    per step): refused in one line with the least time step allowed, where it used to run until killed."""
+    line = refused(capsys, tmp_path, "popbal.time_step=1e-9")
+    assert "popbal.time_step = 1e-09 s" in line and "6e+10 time steps" in line
+    assert f"at most {limits.MAX_STEPS}" in line and f"{60.0 / limits.MAX_STEPS:.4g} s" in line
+    # the library refuses it too, and a time step just above the bound is accepted by the check
+    with pytest.raises(CaseError, match="popbal.time_step"):
+        popbal.run(popbal.setup("simple", {"popbal.time_step": 1e-9}))
+    model = popbal.setup("simple", {"popbal.time_step": 1.01 * 60.0 / limits.MAX_STEPS})
+    popbal.driver.check_run(model)
