@@ -34,13 +34,12 @@ def add_arguments(parser):
 def main(args) -> int:
     """Run ``settler reduced``; CaseError is reported by settler.cli (exit status 2), and so are the refusals of
     run() (options out of range, too many outputs, arrays over popbal.limits.memory_limit())."""
+    from settler.cases import case_with_overrides
     from settler.cli import warn_implausible
     from settler.output import prepare_output_folder
 
     from . import run, setup
     from .driver import check_run
-
-    from settler.cases import case_with_overrides
 
     case = case_with_overrides(args.case, args.overrides)
     warn_implausible(case, "reduced")  # before the model is built: its closures may overflow on such a value

@@ -318,8 +318,9 @@ def check_run(model: Model, end_time: float | None = None, output_interval: floa
     the case's popbal.end_time / popbal.output_interval).
 
     Refuses with ValueError an argument that is not a finite number > 0, and with settler.cases.CaseError a run
-    whose outputs, time steps or arrays exceed popbal.limits (MAX_OUTPUTS, MAX_STEPS, memory_limit()). ``names`` name the two arguments in
-    the messages (the command line passes its options, ``--end-time`` and ``--output-interval``).
+    whose outputs, time steps or arrays exceed popbal.limits (MAX_OUTPUTS, MAX_STEPS, memory_limit()). ``names``
+    name the two arguments in the messages (the command line passes its options, ``--end-time`` and
+    ``--output-interval``).
     """
     p = model.case.popbal
     end_name, interval_name = names

@@ -146,12 +146,18 @@ def estimate(cells, sections: float, outputs: float, ages: int, speed_table: boo
     return parts
 
 
+def _run_length(stop: float, end_name: str, end_value) -> str:
+    """'END_NAME = VALUE s' for a refusal, with the run length where it differs (a horizontal run stops at its
+    residence time)."""
+    over = f" (run length {stop:g} s)" if end_value is not None and stop != end_value else ""
+    return f"{end_name} = {end_value!r} s{over}"
+
+
 def check_outputs(stop: float, interval: float, interval_name: str, end_name: str, end_value) -> float:
     """The number of outputs of a run; CaseError if more than MAX_OUTPUTS."""
     count = output_count(stop, interval)
     if count > MAX_OUTPUTS:
-        over = f" (run length {stop:g} s)" if end_value is not None and stop != end_value else ""
-        raise CaseError(f"{interval_name} = {interval!r} s with {end_name} = {end_value!r} s{over}: "
+        raise CaseError(f"{interval_name} = {interval!r} s with {_run_length(stop, end_name, end_value)}: "
                         f"{count_text(count)} outputs, allowed at most {MAX_OUTPUTS} (an interval >= "
                         f"{stop / (MAX_OUTPUTS - 1):.4g} s)")
     return count
@@ -162,8 +168,7 @@ def check_steps(stop: float, time_step: float, end_name: str, end_value) -> floa
     if more than MAX_STEPS."""
     steps = stop / time_step
     if steps > MAX_STEPS:
-        over = f" (run length {stop:g} s)" if end_value is not None and stop != end_value else ""
-        raise CaseError(f"popbal.time_step = {time_step!r} s with {end_name} = {end_value!r} s{over}: at least "
+        raise CaseError(f"popbal.time_step = {time_step!r} s with {_run_length(stop, end_name, end_value)}: at least "
                         f"{count_text(steps)} time steps, allowed at most {MAX_STEPS} (a time step >= "
                         f"{stop / MAX_STEPS:.4g} s)")
     return steps
