@@ -28,9 +28,13 @@ SORT_INTERVAL = 50
 #: droplet has travelled skin/2; a fed run rebuilds it every step anyway (insertions), so a skin that lasts one
 #: fluid step (skin/2 = 1.25 v_max dt) saves a second build, while a larger one would only lengthen the rows the
 #: contact loop filters. Measured on the simple case at 172 000 droplets (54 mm/s in its channel):
-#: 330-340 ms per step with the fixed 0.25 d skin, 270-280 ms with 0.5 d.
+#: 330-340 ms per step with the fixed 0.25 d skin, 270-280 ms with 0.5 d. The cap is 2 d (1 mm for the presets'
+#: 0.5 mm feed): free flight needs the fluid step's travel within skin/2, so a cap of 1 d stopped it (and the DEM
+#: sub-stepped every droplet) whenever the slag ran faster than 62 mm/s at the 4 ms fluid step (125 mm/s at 2 ms);
+#: 2 d keeps it to 125 mm/s at 4 ms (benchmarks/bench_steady.py, simple at 4 ms: 64.0 s per simulated second with
+#: 0 % in free flight at 1 d, 48.7 s with 89 % at 2 d; at 2 ms in the slag's spin-up, 103.5 against 75.8 s).
 SKIN_MIN = 0.25
-SKIN_MAX = 1.0
+SKIN_MAX = 2.0
 SKIN_TRAVEL = 2.5
 
 
