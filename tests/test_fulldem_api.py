@@ -7,7 +7,9 @@ import fulldem
 from settler.cases import CaseError, load_case
 from settler.output import TIME_SERIES
 
-SMALL = {"fulldem__cell_size": 0.01, "fulldem__output_interval": 0.01, "fulldem__snapshot_interval": 0.0}
+# the 2 ms step these end times are whole multiples of (a run ends at the first whole fluid step at or past its end)
+SMALL = {"fulldem__cell_size": 0.01, "fulldem__output_interval": 0.01, "fulldem__snapshot_interval": 0.0,
+         "fulldem__fluid_step": 0.002}
 
 
 def quiet(*args):
