@@ -103,6 +103,18 @@ def summary(runs: Path, names, end_time: float):
     return pd.DataFrame(rows).set_index("run") if rows else pd.DataFrame()
 
 
+def write_table(runs: Path, names, end_time: float, csv_name: str):
+    """The :func:`summary` of the runs found, written to ``runs / csv_name`` and printed; exits if there are none."""
+    import pandas as pd
+
+    table = summary(runs, names, end_time)
+    if table.empty:
+        sys.exit(f"no runs in {runs}")
+    table.to_csv(runs / csv_name)
+    with pd.option_context("display.width", 200):
+        print(table.round(3).to_string())
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=Path, required=True, help="folder of the runs, one sub-folder each")
@@ -120,14 +132,7 @@ def main(argv=None):
             rc = run_variant(args.runs / name, VARIANTS[name], args.end_time)
             if rc:
                 print(f"{name}: stopped with exit code {rc} (see {args.runs / name}.log)", flush=True)
-    table = summary(args.runs, names, args.end_time)
-    if table.empty:
-        sys.exit(f"no runs in {args.runs}")
-    table.to_csv(args.runs / "sensitivity.csv")
-    import pandas as pd
-
-    with pd.option_context("display.width", 200):
-        print(table.round(3).to_string())
+    write_table(args.runs, names, args.end_time, "sensitivity.csv")
 
 
 if __name__ == "__main__":

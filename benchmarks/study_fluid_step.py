@@ -40,7 +40,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from study_coalescence_sensitivity import _read, run_variant, summary  # noqa: E402
+from study_coalescence_sensitivity import _read, run_variant, write_table  # noqa: E402
 
 SEED_2 = "feed.seed=20231030"
 #: Run name -> case overrides (the demo otherwise at its defaults).
@@ -73,14 +73,7 @@ def main(argv=None):
 
         with ThreadPoolExecutor(max(1, args.parallel)) as pool:
             list(pool.map(one, todo))
-    table = summary(args.runs, names, args.end_time)
-    if table.empty:
-        sys.exit(f"no runs in {args.runs}")
-    table.to_csv(args.runs / "fluid_step.csv")
-    import pandas as pd
-
-    with pd.option_context("display.width", 200):
-        print(table.round(3).to_string())
+    write_table(args.runs, names, args.end_time, "fluid_step.csv")
 
 
 if __name__ == "__main__":
