@@ -121,10 +121,11 @@ def test_droplet_heading_for_a_wall_is_sub_stepped():
     assert stepper.last_free_fraction == 1.0
 
 
-def _cluster_in_cloud(seed=3):
-    """A dense cluster of 64 touching droplets (overlaps of about 2 % d, random velocities) in a dilute cloud."""
+def _cluster_in_cloud(seed=3, cloud=216):
+    """A dense cluster of 64 touching droplets (overlaps of about 2 % d, random velocities) in a dilute cloud of
+    ``cloud`` (less those within 2.5 mm of the cluster)."""
     rng = np.random.default_rng(seed)
-    position, diameter, velocity, fluid = _dilute(seed, n=216)
+    position, diameter, velocity, fluid = _dilute(seed, n=cloud)
     side = 4
     grid = np.stack(np.meshgrid(*(np.arange(side),) * 3, indexing="ij"), -1).reshape(-1, 3)
     cluster = 0.0081 + grid * 0.49e-3 + rng.normal(0, 0.005e-3, grid.shape)
@@ -250,3 +251,46 @@ def test_settling_bed_has_no_breach():
     assert counts.breaches == 0
     assert counts.advances >= 30
     assert 0.2 < counts.droplets / (counts.advances * store.count) < 1.0
+
+
+def test_gathered_sub_steps_are_the_sub_steps_in_place_bit_for_bit():
+    """The sub-stepped droplets of a free-flight advance are stepped in arrays of their own (fulldem.dem.gather): the
+    same operations in the same order as stepping them in place among the free droplets (``gather_free=False``),
+    so positions, velocities, forces, drag impulses, the contact record and the free-flight deviations agree bit for
+    bit -- with several slabs, periodic images, a marked coalescing pair inside the cluster (its mutual partner is
+    found through the gathered indices) and per-droplet fluid velocities."""
+    position, diameter, velocity, fluid = _cluster_in_cloud(cloud=2000)
+    runs = []
+    for gather in (True, False):
+        store = _store(position, diameter, velocity)
+        store.mark_pairs([0, 5], [1, 6])  # touching neighbours in the cluster (grid steps along z)
+        store.set_contact_diameters([0, 1, 5, 6], np.full(4, 0.52e-3))
+        stepper = dem_stepper.DemStepper(store, (0.0, 0.0, 0.0), (0.02,) * 3, (True, True, True), H, 5.0, 0.5e-3, 0.5,
+                                         0.1e-3, BODY, free_flight=True, record_first_contacts=True,
+                                         every_contact=True)
+        stepper.gather_free = gather
+        stepper.droplets_changed()
+        stepper.set_drag(3 * math.pi * MU * store.diameter[: store.capacity])
+        n = store.count
+        local_fluid = fluid[store.ident[:n]]  # (the set-up sorted the droplets; later re-sorts permute it in place)
+        impulse = np.zeros((n, 3))
+        contacts = []
+        for _ in range(4):
+            stepper.advance(STEPS, local_fluid, impulse)
+            contacts.append(stepper.take_first_contacts())
+        runs.append((store, stepper, impulse, contacts))
+    (gathered, stepper, impulse_gathered, record_gathered), (in_place, other, impulse_in_place, record_in_place) = runs
+    n = gathered.count
+    counts = stepper.free_flight_counts
+    assert counts.advances == 4 and counts.breaches == 0 and 0.0 < stepper.last_free_fraction < 1.0
+    assert stepper._gathered.bounds.shape[0] - 1 >= 4  # several slabs, so the slab mapping matters
+    assert sum(len(a) for a, _, _ in record_gathered) > 0 and stepper.max_overlap_ratio > 0.0
+    np.testing.assert_array_equal(gathered.position[:n], in_place.position[:n])
+    np.testing.assert_array_equal(gathered.velocity[:n], in_place.velocity[:n])
+    np.testing.assert_array_equal(stepper.force[:n], other.force[:n])
+    np.testing.assert_array_equal(impulse_gathered, impulse_in_place)
+    np.testing.assert_array_equal(stepper._deviation[:n], other._deviation[:n])
+    for (a, b, speed), (a2, b2, speed2) in zip(record_gathered, record_in_place):
+        np.testing.assert_array_equal(a, a2)
+        np.testing.assert_array_equal(b, b2)
+        np.testing.assert_array_equal(speed, speed2)

@@ -246,14 +246,14 @@ def step_fused(position, velocity, position_next, velocity_next, b, count, c, w,
 
 
 @njit(cache=True, inline="always")
-def _slab_kick(s, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
+def _slab_kick(lo, hi, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
                body_acceleration, dem_step, track, impulse, deviation, drift):
-    """Finish the step of slab s's droplets with their force; with ``drift`` also start the next step and zero the
-    force for the next accumulation. Droplets in free flight (``flags``) are left alone. Returns the largest
+    """Finish the step of a slab's droplets lo..hi-1 with their force; with ``drift`` also start the next step and
+    zero the force for the next accumulation. Droplets in free flight (``flags``) are left alone. Returns the largest
     squared displacement [m^2]."""
     moved = 0.0
     half_step = 0.5 * dem_step
-    for p in range(s * count // nslab, (s + 1) * count // nslab):
+    for p in range(lo, hi):
         if flags[p] & FREE_FLIGHT:
             continue
         if drift:
@@ -269,17 +269,26 @@ def _slab_kick(s, nslab, count, position, velocity, force, mass, flags, drag, fl
     return moved
 
 
+def slab_bounds(count, nslab):
+    """First index of each of ``nslab`` slabs of ``count`` droplets, and ``count`` at the end: (nslab + 1,) int64,
+    slab s being droplets bounds[s]..bounds[s + 1]-1 (s count // nslab on: the partition of
+    :func:`fulldem.dem.pairs.contact_forces_half`)."""
+    return np.arange(nslab + 1, dtype=np.int64) * count // nslab
+
+
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, even_pending, last):
+def step_half(position, velocity, b, count, c, w, m, bounds, candidates, force, even_pending, last):
     """One step of the half-list scheme in two parallel phases (three for the ``last`` step).
 
-    Phase A, even slabs: (if ``even_pending``) finish their previous step and start this one
-    (:func:`integrate_kick_drift`), then add their rows' forces. Phase B, odd slabs: add their rows' forces, which
-    completes their droplets' forces (no other slab running later writes them), then kick-drift them. The even
-    slabs' droplets are left pending (their forces are complete only after phase B); the next call finishes them
-    first. ``force`` must be zero on entry except for pending even droplets, and is left so. With ``last`` both
-    parities only finish the step (no drift) and ``force`` keeps the forces at the final positions. Same
-    partitioning rules as :func:`contact_forces_half`. Returns (largest overlap ratio [-], largest displacement [m]).
+    The droplets are cut into slabs of consecutive indices, slab s being bounds[s]..bounds[s + 1]-1 (``bounds``
+    (nslab + 1,) int64, :func:`slab_bounds`, or a gathered system's own, :mod:`fulldem.dem.gather`). Phase A, even
+    slabs: (if ``even_pending``) finish their previous step and start this one (:func:`integrate_kick_drift`), then
+    add their rows' forces. Phase B, odd slabs: add their rows' forces, which completes their droplets' forces (no
+    other slab running later writes them), then kick-drift them. The even slabs' droplets are left pending (their
+    forces are complete only after phase B); the next call finishes them first. ``force`` must be zero on entry
+    except for pending even droplets, and is left so. With ``last`` both parities only finish the step (no drift)
+    and ``force`` keeps the forces at the final positions. Same partitioning rules as :func:`contact_forces_half`.
+    Returns (largest overlap ratio [-], largest displacement [m]).
     """
     diameter, mass, flags, partner = b
     (start, index, damping, period, inverse_period, periodic_any, stiffness_ref, diameter_ref, law, approach, _,
@@ -289,34 +298,38 @@ def step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, e
     record_window = -1.0 if every_contact else dem_step  # < 0: every contact recorded (Contacts.every_contact)
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
+    nslab = bounds.shape[0] - 1
     worst = np.zeros(nslab)
     travel = np.zeros(nslab)
     for q in prange((nslab + 1) // 2):
         s = 2 * q
+        lo, hi = bounds[s], bounds[s + 1]
         if even_pending:
-            travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity,
-                                   stride, body_acceleration, dem_step, track, impulse, deviation, True)
-        worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass, flags,
-                              partner, start, index, damping, periodic_any, period, inverse_period, stiffness_ref,
-                              diameter_ref, law, approach, record_window, walls, wall_lower, wall_upper, side, height,
-                              transverse, radius, wall_zeta, candidates[s], force)
+            travel[s] = _slab_kick(lo, hi, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
+                                   body_acceleration, dem_step, track, impulse, deviation, True)
+        worst[s] = _slab_rows(lo, hi, position, velocity, diameter, mass, flags, partner, start, index, damping,
+                              periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law, approach,
+                              record_window, walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta,
+                              candidates[s], force)
     for q in prange(nslab // 2):
         s = 2 * q + 1
-        worst[s] = _slab_rows(s * count // nslab, (s + 1) * count // nslab, position, velocity, diameter, mass, flags,
-                              partner, start, index, damping, periodic_any, period, inverse_period, stiffness_ref,
-                              diameter_ref, law, approach, record_window, walls, wall_lower, wall_upper, side, height,
-                              transverse, radius, wall_zeta, candidates[s], force)
-        travel[s] = _slab_kick(s, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
+        lo, hi = bounds[s], bounds[s + 1]
+        worst[s] = _slab_rows(lo, hi, position, velocity, diameter, mass, flags, partner, start, index, damping,
+                              periodic_any, period, inverse_period, stiffness_ref, diameter_ref, law, approach,
+                              record_window, walls, wall_lower, wall_upper, side, height, transverse, radius, wall_zeta,
+                              candidates[s], force)
+        travel[s] = _slab_kick(lo, hi, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
                                body_acceleration, dem_step, track, impulse, deviation, not last)
     if last:
         for q in prange((nslab + 1) // 2):
-            _slab_kick(2 * q, nslab, count, position, velocity, force, mass, flags, drag, fluid_velocity, stride,
+            s = 2 * q
+            _slab_kick(bounds[s], bounds[s + 1], position, velocity, force, mass, flags, drag, fluid_velocity, stride,
                        body_acceleration, dem_step, track, impulse, deviation, False)
     return worst.max(), math.sqrt(travel.max())
 
 
 @njit(cache=True)
-def step_half_many(steps, travel_bound, half_skin, lower, position, velocity, b, count, c, w, m, nslab, candidates,
+def step_half_many(steps, travel_bound, half_skin, lower, position, velocity, b, count, c, w, m, bounds, candidates,
                    force, even_pending):
     """Up to ``steps`` consecutive :func:`step_half` calls in one compiled loop (no Python between steps: at ten
     thousand droplets a step takes about 0.2 ms, and a Python call a good part of that).
@@ -335,7 +348,7 @@ def step_half_many(steps, travel_bound, half_skin, lower, position, velocity, b,
         if travel_bound > half_skin:
             return k, peak, worst, travel_bound, pending
         last = k + 1 == steps
-        worst, moved = step_half(position, velocity, b, count, c, w, m, nslab, candidates, force, pending, last)
+        worst, moved = step_half(position, velocity, b, count, c, w, m, bounds, candidates, force, pending, last)
         peak = max(peak, worst)
         travel_bound += moved
         pending = not last
@@ -343,15 +356,17 @@ def step_half_many(steps, travel_bound, half_skin, lower, position, velocity, b,
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def finish_even_slabs(position, velocity, force, mass, flags, m, count, nslab):
+def finish_even_slabs(position, velocity, force, mass, flags, m, count, bounds):
     """Kick-drift the pending even slabs of :func:`step_half` (all droplets then at the same time level, forces
-    zero), e.g. before a neighbour-list rebuild; ``flags`` those of the :class:`Bodies` of the steps. Returns the
-    largest displacement [m]."""
+    zero), e.g. before a neighbour-list rebuild; ``flags`` those of the :class:`Bodies` of the steps, ``bounds``
+    their slabs. Returns the largest displacement [m]."""
     drag, fluid_velocity, body_acceleration, dem_step, impulse, deviation = m
     stride = 1 if fluid_velocity.shape[0] > 1 else 0
     track = impulse.shape[0] > 0
+    nslab = bounds.shape[0] - 1
     travel = np.zeros(nslab)
     for q in prange((nslab + 1) // 2):
-        travel[2 * q] = _slab_kick(2 * q, nslab, count, position, velocity, force, mass, flags, drag,
-                                   fluid_velocity, stride, body_acceleration, dem_step, track, impulse, deviation, True)
+        s = 2 * q
+        travel[s] = _slab_kick(bounds[s], bounds[s + 1], position, velocity, force, mass, flags, drag,
+                               fluid_velocity, stride, body_acceleration, dem_step, track, impulse, deviation, True)
     return math.sqrt(travel.max())

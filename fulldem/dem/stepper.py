@@ -9,6 +9,7 @@ the tests compare them with; the DEM-only benchmark's driver is ``benchmarks/ben
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 
@@ -18,8 +19,9 @@ from . import laws
 from .diagnostics import droplet_masses
 from .free_flight import (FREE_FLIGHT_MARGIN, FREE_FLIGHT_MIN_FRACTION, FreeFlightCounts, free_flight_candidates,
                           free_flight_jump, free_flight_pairs, free_flight_violations)
+from .gather import Gathered
 from .integrators import (drag_factors_into, finish_even_slabs, integrate_final, integrate_initial,
-                          integrate_kick_drift, step_fused, step_half_many)
+                          integrate_kick_drift, slab_bounds, step_fused, step_half_many)
 from .neighbours import NeighbourList, wrap_positions
 from .pairs import contact_forces_full, contact_forces_half, first_contacts, pair_damping, slab_count
 from .records import NO_DEVIATION, NO_RECORD, Bodies, Contacts, Motion, _chunks, contacts_record, walls_record
@@ -57,6 +59,11 @@ class DemStepper:
     (new p is old order[p]; ``ident`` follows the droplets), else None. A caller holding other per-droplet arrays
     permutes them with it, or passes ``sort_on_rebuild=False``.
     """
+
+    #: Run a free-flight advance's sub-steps on the sub-stepped droplets gathered into arrays of their own
+    #: (:mod:`fulldem.dem.gather`; bit-identical, 2.4-2.7 times faster on the simple case's steady state) rather
+    #: than in place among the free ones (False: the tests' reference).
+    gather_free = True
 
     def __init__(self, store, lower, size, periodic, dem_step, stiffness_ref, diameter_ref, restitution, skin,
                  body_acceleration, wall_restitution=None, law="hooke", absorbing_bottom=False, outlet=None,
@@ -113,6 +120,7 @@ class DemStepper:
         self._reach = np.zeros(0)
         self._deviation = np.zeros(0)
         self._start = {}  # the state at the start of a free-flight advance, to redo it (position, velocity, ...)
+        self._gathered = Gathered()  # the sub-stepped droplets of a free-flight advance (see _advance_gathered)
         self._advance_travel = 0.0  # the sum of the largest step displacements over the last half-list advance [m]
         self._advance_steps = 0  # ... and its steps
 
@@ -359,7 +367,8 @@ class DemStepper:
         start_bound = self._travel_bound
         motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.dem_step, impulse, self._deviation)
         self._travel_bound += integrate_initial(s.position, s.velocity, self.force, self.mass, motion, n, nchunk)
-        if not self._advance_half(steps, fluid_velocity, impulse, free=True) or (
+        sub_steps = self._advance_gathered if self.gather_free else partial(self._advance_half, free=True)
+        if not sub_steps(steps, fluid_velocity, impulse) or (
                 farthest > valid and self._travel_bound > 0.5 * nl.skin):
             counts.list_checks += 1
             self._restore_start(impulse)
@@ -479,7 +488,7 @@ class DemStepper:
                     return False
                 if pending:  # bring every droplet to the same time level before checking the list
                     self._travel_bound += finish_even_slabs(s.position, s.velocity, self.force, self.mass,
-                                                            bodies.flags, motion, n, nslab)
+                                                            bodies.flags, motion, n, slab_bounds(n, nslab))
                     pending = False
                 builds = nl.builds
                 self._keep_list(fluid_velocity, impulse)
@@ -491,7 +500,7 @@ class DemStepper:
             before = self._travel_bound
             taken, peak, worst, self._travel_bound, pending = step_half_many(
                 steps - done, self._travel_bound, 0.5 * nl.skin, self.lower, s.position, s.velocity, bodies,
-                n, self._contacts(), self.walls, motion, nslab, self.candidates, self.force, pending)
+                n, self._contacts(), self.walls, motion, slab_bounds(n, nslab), self.candidates, self.force, pending)
             travelled += self._travel_bound - before
             if taken:
                 self.max_overlap_ratio = worst
@@ -499,6 +508,36 @@ class DemStepper:
             done += taken
             self.steps += taken
         self._advance_travel, self._advance_steps = travelled, steps
+        return True
+
+    def _advance_gathered(self, steps, fluid_velocity, impulse) -> bool:
+        """The sub-steps of a free-flight advance, run on the sub-stepped droplets gathered into arrays of their own
+        (:class:`fulldem.dem.gather.Gathered`: bit-identical to :meth:`_advance_half` with ``free``, and faster
+        since the free droplets' rows are not in the way). Returns False, having stopped, when the list must be
+        checked; else True."""
+        s, n, nl = self.store, self.store.count, self.neighbours
+        self.force[:n] = 0.0
+        if self._travel_bound > 0.5 * nl.skin:
+            return False
+        bounds = slab_bounds(n, slab_count(n, nl.longest_jump))
+        motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.dem_step, impulse, self._deviation)
+        contacts = self._contacts()
+        g = self._gathered
+        bodies, gathered_contacts, gathered_motion = g.gather(self._free_flags, n, contacts, bounds, s.position,
+                                                              s.velocity, self._bodies(self._free_flags), motion)
+        self._ensure_candidates(bounds.shape[0] - 1)  # (the gathered rows are no longer than the list's)
+        before = self._travel_bound
+        taken, peak, worst, self._travel_bound, _ = step_half_many(
+            steps, self._travel_bound, 0.5 * nl.skin, self.lower, g.position, g.velocity, bodies, g.count,
+            gathered_contacts, self.walls, gathered_motion, g.bounds, self.candidates, g.force, False)
+        g.scatter(s.position, s.velocity, self.force, contacts.approach)
+        if taken:
+            self.max_overlap_ratio = worst
+            self.peak_overlap_ratio = max(self.peak_overlap_ratio, peak)
+        self.steps += taken
+        if taken < steps:
+            return False
+        self._advance_travel, self._advance_steps = self._travel_bound - before, steps
         return True
 
     def _step_fused(self, fluid_velocity, impulse, nchunk):
