@@ -1,6 +1,7 @@
 """Machine tuning, kept apart from the physics: how many threads a DEM advance uses, how thick the neighbour-list
 skin is and how often droplets are re-sorted in memory. None of it changes what a run computes beyond round-off
-(the thread choice splits an advance into segments); all of it changes how fast it runs.
+(the timed thread choice splits advances of THREAD_PROBE_EVERY steps or more into segments); all of it changes how
+fast it runs.
 """
 
 from __future__ import annotations
@@ -14,9 +15,17 @@ import numpy as np
 #: machine shared with other busy processes a small parallel step waits for a descheduled thread.
 PARALLEL_MIN_DROPLETS = 2000
 
-#: Steps between two timings of one thread against all (``ThreadChoice(threads=None)``), and steps per timing.
+#: Steps between two timings of one thread against all (``ThreadChoice(threads=None)``) inside one long advance
+#: (THREAD_PROBE_EVERY steps or more, as the DEM-only benchmark's), and steps per timing.
 THREAD_PROBE_EVERY = 500
 THREAD_PROBE_STEPS = 10
+
+#: Shorter advances (a coupled run's sub-steps of one fluid step: 71 at the presets' 4 ms) are timed whole, one at
+#: all threads and the next at one, this many steps after the last timing: an advance is never split, so the
+#: results are those of a fixed thread count bit for bit. (Splitting every fluid step's advance into 10 + 10 + 51
+#: steps, as before, cost three free-flight selections a step and 10 sub-steps on one thread: on the simple
+#: case's steady state, 18 + 11 ms against 7 ms for those 20 sub-steps.)
+THREAD_PROBE_WHOLE_EVERY = 5000
 
 #: Droplets are re-sorted by neighbour cell (memory locality of the DEM and coupling passes) in every fluid step in
 #: which some entered or left, and otherwise every this many fluid steps (they move a small fraction of a cell per
@@ -55,15 +64,24 @@ class ThreadChoice:
     """How many threads the DEM kernels of an advance run on.
 
     One below :data:`PARALLEL_MIN_DROPLETS` droplets; else ``threads`` when given, or when None the faster of one and
-    all threads, re-timed every :data:`THREAD_PROBE_EVERY` steps in long advances (on a machine shared with other
-    busy processes, threads that wait for each other at every phase can be slower than one). The results do not
-    depend on the thread count (the timed choice splits the advance into segments, which changes them at round-off:
-    fused multiply-adds fall differently at segment ends).
+    all threads (on a machine shared with other busy processes, threads that wait for each other at every phase can
+    be slower than one), timed two ways:
+
+    * an advance shorter than :data:`THREAD_PROBE_EVERY` steps runs whole on one thread count: the first one on all
+      (it may compile), then, every :data:`THREAD_PROBE_WHOLE_EVERY` steps, one advance timed on all threads and
+      the next on one; the others run on the faster. The results do not depend on the thread count, so these are
+      bit for bit those of a fixed one;
+    * a longer advance is split, a timing of :data:`THREAD_PROBE_STEPS` steps on each count every
+      :data:`THREAD_PROBE_EVERY` steps; the segments change the results at round-off (fused multiply-adds fall
+      differently at segment ends).
     """
 
     def __init__(self, threads=None):
         self.threads = None if threads is None else max(1, int(threads))
         self.timed = None  # the faster thread count of the last timing
+        self._timing = {}  # seconds per step of the whole advances timed so far in the current timing
+        self._since = 0  # steps run since the last timing of whole advances
+        self._calls = 0
 
     def run(self, count, steps, advance):
         """Run ``advance(k)`` (k steps for ``count`` droplets; returns a droplet permutation or None) for ``steps``
@@ -73,8 +91,8 @@ class ThreadChoice:
             fixed = 1
         elif self.threads is not None:
             fixed = min(self.threads, threads)
-        elif steps < 4 * THREAD_PROBE_STEPS:
-            fixed = self.timed or threads
+        elif steps < THREAD_PROBE_EVERY:
+            return self._run_whole(steps, advance, threads)
         else:
             fixed = None
         order = None
@@ -100,6 +118,27 @@ class ThreadChoice:
             return order
         finally:
             numba.set_num_threads(threads)
+
+    def _run_whole(self, steps, advance, threads):
+        """One advance on one thread count, timed when a timing is due (see the class docstring)."""
+        self._calls += 1
+        due = self._calls > 1 and (self.timed is None or self._since >= THREAD_PROBE_WHOLE_EVERY)
+        candidate = next(c for c in (threads, 1) if c not in self._timing) if due else None
+        try:
+            numba.set_num_threads(candidate or self.timed or threads)
+            start = time.perf_counter()
+            order = advance(steps)
+            seconds = time.perf_counter() - start
+        finally:
+            numba.set_num_threads(threads)
+        if candidate is None:
+            self._since += steps
+        else:
+            self._timing[candidate] = seconds / steps
+            if len(self._timing) == 2:
+                self.timed = min(self._timing, key=self._timing.get)
+                self._timing, self._since = {}, 0
+        return order
 
 
 class PhaseTimes:

@@ -7,7 +7,9 @@ trajectory under drag, the overlap of a settling pile).
 
 import decimal
 import math
+import time
 
+import numba
 import numpy as np
 import pytest
 
@@ -476,13 +478,40 @@ def test_results_do_not_depend_on_the_thread_count():
         stepper.advance(4 * tuning.THREAD_PROBE_STEPS + 7, np.zeros((1, 3)), dem_stepper.NO_IMPULSE)
         order = np.argsort(store.ident[:n])
         states.append((store.position[:n][order], store.velocity[:n][order], stepper.neighbours.builds))
-    # fixed thread counts agree bit for bit; the timed choice splits the advance into segments, which moves the
-    # fused multiply-adds of the segment ends (round-off only)
-    np.testing.assert_array_equal(states[1][0], states[0][0])
-    np.testing.assert_array_equal(states[1][1], states[0][1])
-    np.testing.assert_allclose(states[2][0], states[0][0], rtol=1e-14, atol=0)
-    np.testing.assert_allclose(states[2][1], states[0][1], rtol=1e-12, atol=1e-18)
+    # fixed thread counts agree bit for bit, and so does the timed choice, which runs an advance shorter than
+    # THREAD_PROBE_EVERY whole on one count
+    assert 4 * tuning.THREAD_PROBE_STEPS + 7 < tuning.THREAD_PROBE_EVERY
+    for position, velocity, _ in states[1:]:
+        np.testing.assert_array_equal(position, states[0][0])
+        np.testing.assert_array_equal(velocity, states[0][1])
     assert min(builds for _, _, builds in states) > 1
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs two Numba threads")
+def test_timed_thread_choice_times_short_advances_whole():
+    """ThreadChoice(None) on advances shorter than THREAD_PROBE_EVERY: the first on all threads (untimed: it may
+    compile), then one timed on all and one on a single thread, the faster for THREAD_PROBE_WHOLE_EVERY steps, then
+    timed again; no advance is split. The fake advance is slow on two threads, so one is chosen."""
+    threads = min(2, numba.config.NUMBA_NUM_THREADS)
+    numba.set_num_threads(threads)
+    seen = []
+
+    def advance(k):
+        seen.append((numba.get_num_threads(), k))
+        time.sleep(0.002 if numba.get_num_threads() > 1 else 0.0)
+        return None
+
+    choice = tuning.ThreadChoice(None)
+    steps = 71
+    calls = 3 + tuning.THREAD_PROBE_WHOLE_EVERY // steps + 3
+    for _ in range(calls):
+        choice.run(tuning.PARALLEL_MIN_DROPLETS, steps, advance)
+    assert all(k == steps for _, k in seen)  # whole advances
+    used = [t for t, _ in seen]
+    assert used[:3] == [threads, threads, 1] and choice.timed == 1
+    again = 3 + math.ceil(tuning.THREAD_PROBE_WHOLE_EVERY / steps)  # the first call after the interval
+    assert set(used[3:again]) == {1} and used[again:again + 2] == [threads, 1]
+    assert numba.get_num_threads() == threads  # put back
 
 
 def test_drag_factors_series_and_exponential_branches_agree():
