@@ -218,6 +218,15 @@ FREE_FLIGHT_MARGIN = 0.05
 #: selection's two passes and the saved state cost about what they save).
 FREE_FLIGHT_MIN_FRACTION = 0.05
 
+#: An advance over which the sub-stepped droplets are expected (at the last advance's rate) to travel more than
+#: this fraction of skin/2 runs as consecutive free-flight advances, each expected within it, if at most
+#: :data:`FREE_FLIGHT_SEGMENTS` are needed (the list is checked, and rebuilt if need be, between them): a whole
+#: advance that cannot keep the list valid is sub-stepped without free flight. Measured on the simple case's slag spin-up
+#: (bench_steady's warm-up, 2 threads, 150-180 mm/s in the channel at the 4 ms fluid step, skin/2 = 0.5 mm): whole
+#: advances 0 % free and 370 ms a step.
+FREE_FLIGHT_SEGMENT_FILL = 0.8
+FREE_FLIGHT_SEGMENTS = 4
+
 
 class FreeFlightCounts:
     """What free flight did since the stepper was made (:attr:`DemStepper.free_flight_counts`).

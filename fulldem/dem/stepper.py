@@ -14,11 +14,12 @@ from functools import partial
 import numpy as np
 
 from ..droplets import permute_rows
-from ..tuning import ThreadChoice
+from ..tuning import ThreadChoice, compose
 from . import laws
 from .diagnostics import droplet_masses
-from .free_flight import (FREE_FLIGHT_MARGIN, FREE_FLIGHT_MIN_FRACTION, FreeFlightCounts, free_flight_candidates,
-                          free_flight_jump, free_flight_pairs, free_flight_violations)
+from .free_flight import (FREE_FLIGHT_MARGIN, FREE_FLIGHT_MIN_FRACTION, FREE_FLIGHT_SEGMENT_FILL, FREE_FLIGHT_SEGMENTS,
+                          FreeFlightCounts, free_flight_candidates, free_flight_jump, free_flight_pairs,
+                          free_flight_violations)
 from .gather import Gathered
 from .integrators import (drag_factors_into, finish_even_slabs, integrate_final, integrate_initial,
                           integrate_kick_drift, slab_bounds, step_fused, step_half_many)
@@ -304,15 +305,38 @@ class DemStepper:
         self._read_first_contacts()  # before anyone changes the store
         return order
 
-    def _advance(self, steps, fluid_velocity, impulse):
-        s, n, nl = self.store, self.store.count, self.neighbours
-        nchunk = _chunks(n)
+    def _free_flight_possible(self) -> bool:
         # a whole step per kernel call when nothing else enters the force (a subclass that adds forces in
         # compute_forces takes the general path: forces, then kick and drift of consecutive steps in one pass)
         fused = type(self).compute_forces is DemStepper.compute_forces
+        return self.free_flight and fused and self.neighbours.half and self.store.count > 0
+
+    def _advance(self, steps, fluid_velocity, impulse):
+        """The advance, as consecutive free-flight advances where the list would not last a whole one
+        (:data:`fulldem.dem.free_flight.FREE_FLIGHT_SEGMENT_FILL`)."""
+        segments = 1
+        if self._free_flight_possible() and self._advance_steps:
+            expected = self._advance_travel * steps / self._advance_steps
+            fill = FREE_FLIGHT_SEGMENT_FILL * 0.5 * self.neighbours.skin
+            segments = min(max(math.ceil(expected / fill), 1), steps)
+        if segments == 1 or segments > FREE_FLIGHT_SEGMENTS:  # (more: even the segments would be sub-stepped)
+            return self._advance_once(steps, fluid_velocity, impulse)
+        order = None
+        free = 0.0
+        for q in range(segments):
+            part = (q + 1) * steps // segments - q * steps // segments
+            order = compose(order, self._advance_once(part, fluid_velocity, impulse))
+            free += self.last_free_fraction * part
+        self.last_free_fraction = free / steps
+        return order
+
+    def _advance_once(self, steps, fluid_velocity, impulse):
+        s, n, nl = self.store, self.store.count, self.neighbours
+        nchunk = _chunks(n)
+        fused = type(self).compute_forces is DemStepper.compute_forces
         self._order = None
         self.last_free_fraction = 0.0
-        if self.free_flight and fused and nl.half and n and self._advance_free(steps, fluid_velocity, impulse, nchunk):
+        if self._free_flight_possible() and self._advance_free(steps, fluid_velocity, impulse, nchunk):
             return self._order
         motion = Motion(self.drag, fluid_velocity, self.body_acceleration, self.dem_step, impulse)
         self._travel_bound += integrate_initial(s.position, s.velocity, self.force, self.mass, motion, n, nchunk)
@@ -384,6 +408,8 @@ class DemStepper:
                                  start["position"], start["velocity"], start["impulse"], n, nchunk)
         # the free droplets moved at most `moved` since the advance's start, the others as the steps' sum says
         self._travel_bound = max(self._travel_bound, start_bound + moved)
+        # what the next advance expects (list checks, segments): the bound's growth, the free droplets' jumps included
+        self._advance_travel = self._travel_bound - start_bound
         counts.advances += 1
         counts.droplets += int(free)
         self.last_free_fraction = free / n
