@@ -37,12 +37,14 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from settler.cases import CaseError, load_case
+from settler.cases import SCHEMA, CaseError, load_case
 from settler.output import (OutputError, atomic_write_text, mass_balance_error, prepare_output_folder,
                             read_channel_profile, read_time_series, time_series_frame, to_json, write_channel_profile,
                             write_run_metadata, write_time_series)
 
+from .coupling import smoothing
 from .coupling.filtered import filtered_width_allowed
+from .dem.laws import contact_time, effective_mass
 from .droplets import MERGED
 from .fluid import solver as fl
 from .io import channel
@@ -50,7 +52,7 @@ from .io.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from .io.droplet_list import DropletListError, read_droplet_list
 from .io.progress import Progress
 from .io.snapshots import SnapshotWriter
-from .stepper import Counters, Simulation
+from .stepper import Counters, Simulation, contact_scales
 from .submodels.base import missing_submodels
 from .submodels.coalescence import size_table_frame
 
@@ -92,10 +94,16 @@ def _machine_memory() -> float:
         return math.inf
 
 
+#: The fewest DEM steps per contact a given fulldem.dem_step may give: the fewest fulldem.contact_steps allows.
+MIN_CONTACT_STEPS = int(SCHEMA["fulldem"]["contact_steps"].minimum)
+
+
 def check_case(case) -> None:
     """Refuse, with :class:`settler.cases.CaseError`, a case the engine cannot run: a cell size that does not divide
     the box into whole cubic cells, fewer than :data:`MIN_CELLS` cells along an axis, a grid too large for the
-    machine's memory, or a smoothing width the filtered kernel cannot have."""
+    machine's memory, a smoothing kernel wider than the box or one the filtered kernel cannot have, or a given DEM
+    step that resolves the shortest contact with fewer than :data:`MIN_CONTACT_STEPS` steps (a DEM step equal to
+    the fluid step, say)."""
     g, fd = case.geometry, case.fulldem
     edges = {"geometry.width": g.width, "geometry.depth": g.depth, "geometry.height": g.height}
     counts = {k: v / fd.cell_size for k, v in edges.items()}
@@ -118,6 +126,22 @@ def check_case(case) -> None:
                         f"= {cells:.3g} cells needs about {need / 2**30:.3g} GiB, more than {MEMORY_FRACTION:.0%} of this "
                         f"machine's {have / 2**30:.3g} GiB; allowed: a larger cell_size (at most "
                         f"{MEMORY_FRACTION * have * cells / need:.3g} cells)")
+    sigma = fd.sigma_cells * fd.cell_size
+    widest = 2.0 * smoothing.DEFAULT_CUT * sigma
+    if widest > min(edges.values()):
+        raise CaseError(f"fulldem.sigma_cells = {fd.sigma_cells:g}: a smoothing kernel of sigma = {sigma:g} m spans "
+                        f"{widest:g} m (2 x {smoothing.DEFAULT_CUT:g} sigma), more than the box's smallest edge "
+                        f"{min(edges.values()):g} m; allowed: sigma_cells <= "
+                        f"{min(edges.values()) / (2.0 * smoothing.DEFAULT_CUT * fd.cell_size):g}")
+    if fd.dem_step > 0.0:
+        _, k_min, m_min = contact_scales(case)
+        duration = contact_time(k_min, effective_mass(m_min, m_min))
+        most = duration / MIN_CONTACT_STEPS
+        if fd.dem_step > most:
+            raise CaseError(f"fulldem.dem_step = {fd.dem_step:g} s: resolves the shortest contact (the smallest fed "
+                            f"pair's, {duration:.3g} s) with {duration / fd.dem_step:.3g} steps; allowed: 0 (chosen "
+                            f"from the contact time, fulldem.contact_steps per contact) or at most {most:.3g} s "
+                            f"({MIN_CONTACT_STEPS} steps per contact, the fewest fulldem.contact_steps allows)")
     if fd.kernel == "filtered" and not filtered_width_allowed(fd.sigma_cells):
         raise CaseError(f"fulldem.sigma_cells = {fd.sigma_cells:g}: the filtered kernel's trilinear step alone is "
                         f"wider; allowed: sigma_cells > 1/sqrt(6) = {1 / math.sqrt(6):.4f}, or fulldem.kernel = 'direct'")

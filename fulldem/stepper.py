@@ -100,6 +100,17 @@ class Counters:
                 if k not in ("merges_by_size", "merges_reported", "marks_reported", "refused_reported")}
 
 
+def contact_scales(case):
+    """(stiffness at the mean fed diameter [N/m], stiffness of the smallest fed pair [N/m], the smallest fed
+    droplet's mass [kg]) of a case: what sets its contact time, hence its DEM step."""
+    f, fd = case.feed, case.fulldem
+    d_ref = f.mean_diameter
+    excess = case.matte.density - case.slag.density
+    stiffness_ref = stiffness_for_overlap(fd.max_overlap, d_ref, excess, fd.load_factor, STANDARD_GRAVITY)
+    d_min = f.mean_diameter * f.scale_min
+    return stiffness_ref, stiffness_ref * (d_min / d_ref) ** 2, sphere_mass(d_min, case.matte.density)
+
+
 class StepDiagnostics(dict):
     """Per-step numbers: max_cell_reynolds, max_cfl, max_overlap_ratio, pressure_iterations, feed_backlog,
     free_fraction (droplets advanced in one exact step instead of the DEM sub-steps, see fulldem.dem *Free flight*),
@@ -162,12 +173,7 @@ class Simulation:
 
         # contacts and the DEM step
         d_ref = f.mean_diameter
-        excess = case.matte.density - case.slag.density
-        self.stiffness_ref = stiffness_for_overlap(fd.max_overlap, d_ref, excess, fd.load_factor,
-                                                   STANDARD_GRAVITY)
-        d_min = f.mean_diameter * f.scale_min
-        m_min = sphere_mass(d_min, case.matte.density)
-        k_min = self.stiffness_ref * (d_min / d_ref) ** 2
+        self.stiffness_ref, k_min, m_min = contact_scales(case)
         self.contact_step = stable_step(k_min, effective_mass(m_min, m_min), fd.contact_steps)
         dem_step = fd.dem_step if fd.dem_step > 0.0 else self.contact_step
         self.substeps = max(1, math.ceil(fd.fluid_step / dem_step - 1e-9))

@@ -3,6 +3,7 @@ uninterrupted run bit for bit; a checkpoint belongs to one case; an output folde
 droplets; a feed the inlet cannot take is reported (issue 10, "a new user's first hour")."""
 
 import json
+import math
 import os
 import signal
 import stat
@@ -272,6 +273,8 @@ def test_feed_backlog_is_reported(tmp_path):
     ("fulldem.cell_size=0.2", "at least 4 cells"),
     ("fulldem.sigma_cells=0.3", "sigma_cells > 1/sqrt(6)"),
     ("fulldem.cell_size=0.00025", "needs about"),  # a 400^3 grid
+    ("fulldem.sigma_cells=100", "more than the box's smallest edge"),  # a 2.5 m kernel in a 0.1 m box
+    ("fulldem.dem_step=0.004", "steps per contact"),  # the DEM step equal to the fluid step
 ])
 def test_grid_refusals_name_the_key(override, expected, capsys, tmp_path):
     with pytest.raises(CaseError, match="fulldem"):
@@ -282,6 +285,25 @@ def test_grid_refusals_name_the_key(override, expected, capsys, tmp_path):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and expected in err and override.split("=")[0] in err, err
     assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+def test_the_kernel_width_and_dem_step_limits_are_where_the_refusals_say():
+    """The largest sigma_cells and DEM step the refusals allow are accepted, a little more is not; the shortest
+    contact they quote is the undamped half-period pi sqrt(m_eff/k) of two of the smallest fed droplets."""
+    case = load_case("demo")
+    g, fd = case.geometry, case.fulldem
+    widest = min(g.width, g.depth, g.height) / (2 * 2.5 * fd.cell_size)  # the stencil spans 2 x 2.5 sigma
+    fr.check_case(load_case("demo", [f"fulldem.sigma_cells={widest * (1 - 1e-9)!r}"]))
+    with pytest.raises(CaseError, match="sigma_cells"):
+        fr.check_case(load_case("demo", [f"fulldem.sigma_cells={widest * (1 + 1e-6)!r}"]))
+    from fulldem.stepper import contact_scales
+
+    _, k_min, m_min = contact_scales(case)
+    duration = math.pi * math.sqrt(0.5 * m_min / k_min)  # m_eff of two equal droplets: m/2
+    most = duration / fr.MIN_CONTACT_STEPS
+    fr.check_case(load_case("demo", [f"fulldem.dem_step={most * (1 - 1e-9)!r}"]))
+    with pytest.raises(CaseError, match=f"{duration:.3g} s"):
+        fr.check_case(load_case("demo", [f"fulldem.dem_step={most * (1 + 1e-6)!r}"]))
 
 
 def test_an_ignored_sigint_stays_ignored(tmp_path, monkeypatch):

@@ -122,7 +122,9 @@ class DemStepper:
         self._deviation = np.zeros(0)
         self._start = {}  # the state at the start of a free-flight advance, to redo it (position, velocity, ...)
         self._gathered = Gathered()  # the sub-stepped droplets of a free-flight advance (see _advance_gathered)
-        self._advance_travel = 0.0  # the sum of the largest step displacements over the last half-list advance [m]
+        # the travel bound's growth over the last advance [m] (sub-steps: the sum of their largest displacements;
+        # free flight: the free droplets' jumps included), what the next one expects (list checks, segments)
+        self._advance_travel = 0.0
         self._advance_steps = 0  # ... and its steps
 
     # -- set-up
