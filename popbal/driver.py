@@ -393,6 +393,8 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
         dt = min(p["time_step"], outputs[next_output] - t)
         if fastest > 0.0:
             dt = min(dt, p["max_courant"] * dz / fastest)
+            limits.check_projected_steps(steps, t, stop, min(p["time_step"], p["max_courant"] * dz / fastest), fastest,
+                                         p["max_courant"], dz)
         feeding = t < model.feed_end - tiny
         if feeding:
             dt = min(dt, model.feed_end - t)

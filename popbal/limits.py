@@ -146,6 +146,30 @@ def estimate(cells, sections: float, outputs: float, ages: int, speed_table: boo
     return parts
 
 
+#: Steps after which a run checks, every STEP_CHECK_EVERY steps, that the steps it is now taking (shortened below
+#: popbal.time_step by the Courant limit of its fastest droplets) leave it within MAX_STEPS: the presets take
+#: 1 200-1 500 steps and never reach the check.
+STEP_CHECK_AFTER = 10_000
+STEP_CHECK_EVERY = 1_000
+
+
+def check_projected_steps(steps: int, t: float, stop: float, dt: float, fastest: float, max_courant: float,
+                          cell_height: float) -> None:
+    """Refuse (:class:`settler.cases.CaseError`) a run whose time step dt [s] -- the Courant limit
+    ``max_courant`` x ``cell_height`` [m] / ``fastest`` [m/s] where that is below popbal.time_step -- would take it
+    past MAX_STEPS steps by the stop time: a feed or a size that makes droplets settle so fast that the run would go
+    on for days (feed.mass_rate = 1e6 kg/s in the demo: 3e-6 s steps, 2e7 of them)."""
+    if steps < STEP_CHECK_AFTER or steps % STEP_CHECK_EVERY:
+        return
+    projected = steps + (stop - t) / dt
+    if projected > MAX_STEPS:
+        raise CaseError(f"the time step has fallen to {dt:.3g} s at t = {t:.4g} s (popbal.max_courant = "
+                        f"{max_courant:g} x the {cell_height:.3g} m cells over the fastest droplets' "
+                        f"{fastest:.3g} m/s): the run to {stop:g} s would take about {count_text(projected)} steps, "
+                        f"allowed at most {MAX_STEPS}; check the feed (feed.mass_rate) and the sizes it grows to "
+                        f"(coalescence.size_limit), or run a shorter time")
+
+
 def _run_length(stop: float, end_name: str, end_value) -> str:
     """'END_NAME = VALUE s' for a refusal, with the run length where it differs (a horizontal run stops at its
     residence time)."""

@@ -173,3 +173,28 @@ def test_a_run_of_months_of_time_steps_is_refused_before_it_starts(capsys, tmp_p
         popbal.run(popbal.setup("simple", {"popbal.time_step": 1e-9}))
     model = popbal.setup("simple", {"popbal.time_step": 1.01 * 60.0 / limits.MAX_STEPS})
     popbal.driver.check_run(model)
+
+
+def test_a_run_whose_steps_shrink_past_the_step_limit_is_stopped_with_the_cause(capsys, tmp_path):
+    """feed.mass_rate = 1e6 kg/s in the demo: droplets grow until the Courant limit of the fastest shortens the
+    steps to microseconds (2e7 of them to 60 s: it used to run until killed). After STEP_CHECK_AFTER steps the run
+    projects its remaining steps and stops in one line naming the step, the speed and the keys to look at."""
+    out = tmp_path / "out"
+    assert main(["reduced", "demo", "feed.mass_rate=1e6", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    line = err[-1]  # (after the plausibility warnings)
+    assert line.startswith("settler reduced: error: ") and "Traceback" not in "\n".join(err)
+    assert not (out / "timeseries.csv").exists()
+    assert "time step has fallen" in line and "feed.mass_rate" in line and f"at most {limits.MAX_STEPS}" in line
+
+
+def test_the_projected_step_check_counts_the_remaining_steps():
+    """check_projected_steps: steps + (stop - t) / dt against MAX_STEPS, checked only after STEP_CHECK_AFTER steps
+    and every STEP_CHECK_EVERY."""
+    after, every, most = limits.STEP_CHECK_AFTER, limits.STEP_CHECK_EVERY, limits.MAX_STEPS
+    dt = 1.0
+    limits.check_projected_steps(after, 0.0, most - after - 1.0, dt, 1.0, 1.0, 1.0)  # just within: accepted
+    with pytest.raises(CaseError, match="time step has fallen"):
+        limits.check_projected_steps(after, 0.0, most - after + 1.0, dt, 1.0, 1.0, 1.0)
+    limits.check_projected_steps(after - every, 0.0, 1e300, dt, 1.0, 1.0, 1.0)  # before the first check
+    limits.check_projected_steps(after + 1, 0.0, 1e300, dt, 1.0, 1.0, 1.0)  # between checks
