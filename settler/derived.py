@@ -263,6 +263,13 @@ PLAUSIBLE_RANGES: dict[str, PlausibleRange] = {
     "slag temperature": PlausibleRange(
         1400.0, 1700.0, "K", "flash-smelting settlers run at about 1490-1600 K; the slag viscosity law and the "
         "thermodynamic data are used near there"),
+    "oxygen pressure": PlausibleRange(
+        1e-9, 101325.0, "Pa", "the grades of data/thermo/README.md's equilibrium need log10(p_O2/atm) of about -8.8 to "
+        "-7.9 (1e-4 to 1e-3 Pa) at 1493-1543 K; a partial pressure cannot exceed the settler's total pressure, about "
+        "one atmosphere"),
+    "SO2 pressure": PlausibleRange(
+        1.0, 101325.0, "Pa", "the default 2e4 Pa is an SO2-rich furnace atmosphere (chosen, data/thermo/README.md); a "
+        "partial pressure cannot exceed the settler's total pressure, about one atmosphere"),
     "interfacial tension": PlausibleRange(
         0.01, 1.0, "N/m", "measured matte-slag interfacial tensions are about 0.05-0.6 N/m"),
     "mean fed diameter": PlausibleRange(
@@ -312,6 +319,14 @@ def plausibility_warnings(case: Case) -> list[str]:
         r = PLAUSIBLE_RANGES[name]
         if _outside(value, r):
             warnings.append(f"{key} = {value:g} {r.unit}: {_range_text(r)}")
+
+    r_ = case.reaction
+    if r_.enabled and r_.end_state == "equilibrium":  # (the pressures are read only there)
+        for key, value, name in (("reaction.oxygen_pressure", r_.oxygen_pressure, "oxygen pressure"),
+                                 ("reaction.so2_pressure", r_.so2_pressure, "SO2 pressure")):
+            r = PLAUSIBLE_RANGES[name]
+            if _outside(value, r):
+                warnings.append(f"{key} = {value:g} {r.unit}: {_range_text(r)}")
 
     summary = feed_summary(case)
     r = PLAUSIBLE_RANGES["mean fed diameter"]

@@ -52,7 +52,30 @@ WARNED = [
     ({"coalescence.size_limit": 0.1}, "drag.law = 'schiller_naumann': above 800"),
     ({"coalescence.enabled": False, "drag.law": "stokes", "feed.mean_diameter": 5e-3},
      "feed.mean_diameter x feed.scale_max = 0.0065 m"),
+    ({"reaction.enabled": True, "reaction.end_state": "equilibrium", "reaction.oxygen_pressure": 1e30},
+     "reaction.oxygen_pressure = 1e+30 Pa: outside 1e-09 to 101325 Pa"),
+    ({"reaction.enabled": True, "reaction.end_state": "equilibrium", "reaction.so2_pressure": 1e6},
+     "reaction.so2_pressure = 1e+06 Pa: outside 1 to 101325 Pa"),
 ]
+
+
+def test_equilibrium_pressures_are_judged_only_where_they_are_read():
+    """The stored pressures of a case without the equilibrium end state are not used, so not warned about; the
+    preset's own (1e-3 Pa O2, 2e4 Pa SO2) pass where they are."""
+    assert plausibility_warnings(load_case("simple", {"reaction.oxygen_pressure": 1e30})) == []
+    assert plausibility_warnings(load_case("simple", {"reaction.enabled": True,
+                                                      "reaction.end_state": "equilibrium"})) == []
+
+
+def test_settler_info_says_the_warnings_a_run_says(capsys):
+    """settler info prints the run's plausibility warnings to stderr (a 1e-300 Pa s viscosity, a 1e30 Pa oxygen
+    pressure), not only the numbers."""
+    from settler.cli import main
+
+    assert main(["info", "simple", "slag.viscosity_reference=1e-300", "reaction.enabled=true",
+                 "reaction.end_state=equilibrium", "reaction.oxygen_pressure=1e30"]) == 0
+    err = capsys.readouterr().err
+    assert "settler info: warning: slag viscosity" in err and "reaction.oxygen_pressure = 1e+30 Pa" in err
 
 
 @pytest.mark.parametrize("overrides, fragment", WARNED, ids=[w[1][:30] for w in WARNED])
