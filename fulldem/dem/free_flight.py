@@ -226,7 +226,7 @@ FREE_FLIGHT_MIN_FRACTION = 0.05
 #: (fulldem.tuning.SKIN_TRAVEL: skin/2 = 1.25 v_max dt), and 0.8 cancelled it, splitting the steady state's
 #: advances in two with a list check between (bench_steady, simple, 2 threads: DEM 42.7 against 31.5 ms a step).
 #: Measured on the simple case's slag spin-up (bench_steady's warm-up, 150-180 mm/s in the channel at the 4 ms
-#: fluid step, skin/2 = 0.5 mm): whole advances 0 % free and 370 ms a step, segments 90 % and 220-230 ms.
+#: fluid step, skin/2 = 0.5 mm): whole advances 0 % free and 370 ms a step, segments 88-89 % and 230-240 ms.
 FREE_FLIGHT_SEGMENT_FILL = 1.0
 FREE_FLIGHT_SEGMENTS = 4
 
