@@ -9,6 +9,9 @@ comparisons and the seed paper's figures need, in a folder of a few MB (SI units
 ``case.toml``               copied as it is (the resolved case)
 ``merges_by_size.csv``      copied as it is, if the run has it (coalescence runs)
 ``channel_profile.csv``     copied as it is, if the run has it
+``zone_profile.csv``,       the zone diagnostics (:data:`settler.output.SNAPSHOT_TABLES`), copied as they are, if the
+``zones.csv``,              run has them
+``lift_by_size.csv``
 ``snapshots.npz``           a few droplet snapshots, chosen evenly over the run's snapshot times (always the last),
                             and the slag velocity on the central x-z plane of each (``np.savez_compressed``, float32;
                             keys below)
@@ -52,6 +55,7 @@ import pandas as pd
 from settler.output import read_channel_profile, read_time_series, to_json
 
 from .files import read_json
+from .runs import read_zone_tables
 
 
 #: Largest size [bytes] of one stored reference folder; above it fewer snapshots are kept (three cases must stay
@@ -59,7 +63,7 @@ from .files import read_json
 SIZE_LIMIT = 5_000_000
 #: Files copied unchanged from the run folder (the first two are required).
 REQUIRED_FILES = ("timeseries.csv", "case.toml")
-OPTIONAL_FILES = ("merges_by_size.csv", "channel_profile.csv")
+OPTIONAL_FILES = ("merges_by_size.csv", "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv")
 SNAPSHOT_FILE = "snapshots.npz"
 INFO_FILE = "reference.json"
 #: Per-droplet arrays of ``snapshots.npz`` (name -> (unit, point_data field of the droplet .vtu)).
@@ -401,7 +405,8 @@ class Reference:
 
     ``timeseries``: DataFrame of :data:`settler.output.TIME_SERIES`; ``case``: the resolved
     :class:`settler.cases.Case`; ``info``: reference.json; ``merges_by_size`` and ``channel_profile``: DataFrames or
-    None; ``snapshot_times``: (n,) [s]; ``folder``: where it lies.
+    None; ``zones``: the zone diagnostics present (:func:`analysis.runs.read_zone_tables`); ``snapshot_times``: (n,)
+    [s]; ``folder``: where it lies.
     """
 
     folder: Path
@@ -411,6 +416,7 @@ class Reference:
     merges_by_size: pd.DataFrame | None
     channel_profile: pd.DataFrame | None
     snapshot_times: np.ndarray
+    zones: dict = dataclasses.field(default_factory=dict)
     _arrays: dict = dataclasses.field(default_factory=dict, repr=False)
 
     def index(self, k_or_time) -> int:
@@ -494,7 +500,8 @@ def load_reference(case_name, root="data/reference") -> Reference:
     return Reference(folder=folder, timeseries=read_time_series(folder / "timeseries.csv"),
                      case=load_case(folder / "case.toml"), info=info,
                      merges_by_size=optional["merges_by_size.csv"],
-                     channel_profile=optional["channel_profile.csv"], snapshot_times=times, _arrays=arrays)
+                     channel_profile=optional["channel_profile.csv"], snapshot_times=times,
+                     zones=read_zone_tables(folder), _arrays=arrays)
 
 
 def available_references(root="data/reference") -> list[str]:

@@ -13,6 +13,8 @@ the rest when asked (SI units throughout):
 :attr:`Run.reference`          ``reference.json`` of a stored reference, else None
 :attr:`Run.merges_by_size`     ``merges_by_size.csv`` (full engine with coalescence), or None
 :attr:`Run.channel_profile`    ``channel_profile.csv``, or None
+:attr:`Run.zones`              the zone diagnostics of a full run (:data:`settler.output.SNAPSHOT_TABLES`): ``{"zone_profile":
+                               ..., "zones": ..., "lift_by_size": ...}`` DataFrames of the files present (empty: none)
 :attr:`Run.case`               the resolved case of ``case.toml`` (:class:`settler.cases.Case`), read when first used
 :meth:`Run.droplets`,          a full run's droplet and slag snapshots (the ``.vtu`` files of ``snapshots.pvd``, or a
 :meth:`Run.slag`               reference's ``snapshots.npz``), read on demand through :mod:`analysis.figures`' readers
@@ -38,7 +40,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from settler.output import TIME_SERIES, OutputError, atomic_write_bytes, read_channel_profile, read_time_series
+from settler.output import (SNAPSHOT_TABLES, TIME_SERIES, OutputError, atomic_write_bytes, read_channel_profile,
+                            read_table, read_time_series)
 
 from .files import read_json
 
@@ -68,6 +71,7 @@ class Run:
     reference: dict | None
     merges_by_size: pd.DataFrame | None
     channel_profile: pd.DataFrame | None
+    zones: dict = dataclasses.field(default_factory=dict)
     _cache: dict = dataclasses.field(default_factory=dict, repr=False)
 
     @property
@@ -212,7 +216,16 @@ def load_run(folder) -> Run:
                 for name in ("merges_by_size.csv", "channel_profile.csv")}  # both plain CSV (+ a units line)
     return Run(folder=folder, engine=_engine(folder, metadata), timeseries=series,
                units=time_series_units(series_path, metadata), metadata=metadata, reference=reference,
-               merges_by_size=optional["merges_by_size.csv"], channel_profile=optional["channel_profile.csv"])
+               merges_by_size=optional["merges_by_size.csv"], channel_profile=optional["channel_profile.csv"],
+               zones=read_zone_tables(folder))
+
+
+def read_zone_tables(folder) -> dict[str, pd.DataFrame]:
+    """The zone diagnostics present in ``folder`` (zone_profile.csv, zones.csv, lift_by_size.csv of
+    :data:`settler.output.SNAPSHOT_TABLES`), keyed by the name without ``.csv``."""
+    folder = Path(folder)
+    return {name[:-4]: read_table(folder / name) for name in SNAPSHOT_TABLES
+            if name != "channel_profile.csv" and (folder / name).is_file()}
 
 
 def _engine(folder: Path, metadata) -> str | None:

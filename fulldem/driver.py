@@ -38,8 +38,8 @@ import numba
 import numpy as np
 
 from settler.cases import SCHEMA, CaseError, load_case
-from settler.output import (OutputError, atomic_write_text, mass_balance_error, prepare_output_folder,
-                            read_channel_profile, read_time_series, time_series_frame, to_json, write_channel_profile,
+from settler.output import (SNAPSHOT_TABLES, OutputError, atomic_write_text, mass_balance_error, prepare_output_folder,
+                            read_table, read_time_series, time_series_frame, to_json, write_table,
                             write_run_metadata, write_time_series)
 
 from .coupling import smoothing
@@ -47,7 +47,7 @@ from .coupling.filtered import filtered_width_allowed
 from .dem.laws import contact_time, effective_mass
 from .droplets import MERGED
 from .fluid import solver as fl
-from .io import channel
+from .io import channel, zones
 from .io.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from .io.droplet_list import DropletListError, read_droplet_list
 from .io.progress import Progress
@@ -401,7 +401,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     sim = Simulation(case, droplets=store, feed=feed)
     sim.initial_mass = sim.mass_in_slag()
     rows = []
-    profile = []  # channel profile rows, one set per snapshot (settler.output.CHANNEL_PROFILE)
+    tables = {name: [] for name in SNAPSHOT_TABLES}  # channel profile and zone rows, one set per snapshot
     wall_before = 0.0  # wall-clock seconds spent before this process (by the runs this one resumes)
     snaps = SnapshotWriter(out, sim.grid)
     if loaded is not None:
@@ -413,9 +413,9 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
         series = out / "timeseries.csv"
         if series.exists():
             rows = [r for r in read_time_series(series).to_dict("records") if r["time"] <= sim.time + 1e-12]
-        if (out / "channel_profile.csv").exists():
-            profile = [r for r in read_channel_profile(out / "channel_profile.csv").to_dict("records")
-                       if r["time"] <= sim.time + 1e-12]
+        for name in tables:
+            if (out / name).exists():
+                tables[name] = [r for r in read_table(out / name).to_dict("records") if r["time"] <= sim.time + 1e-12]
         snaps.entries = [tuple(e) for e in meta.get("snapshots", [])]
         wall_before = float(meta.get("wall_time", 0.0))
         log(f"resumed from {checkpoint} at t = {sim.time:.6g} s, {sim.store.count} droplets")
@@ -451,9 +451,9 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     if not rows:
         rows.append(time_series_row(sim, wall_time()))
         if fd.snapshot_interval > 0:
-            snaps.write(sim.time, sim.store, sim.fluid, np.ones(sim.grid.shape))
-            profile += channel.profile_rows(sim)
-            write_channel_profile(profile, out / "channel_profile.csv")
+            eps_faces, eps_cells = sim.void_fraction()
+            snaps.write(sim.time, sim.store, sim.fluid, eps_cells)
+            _write_snapshot_tables(sim, eps_faces, tables, out)
     good = checkpoint_state(sim)
     if progress:
         log("fulldem: the first step compiles the Numba kernels where no cache exists yet (up to a minute); "
@@ -486,10 +486,9 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
                             "of the mass fed; column feed_backlog); the inlet layer cannot take feed.mass_rate = "
                             f"{case.feed.mass_rate:g} kg/s (widen fulldem.insertion_layer or lower the rate)")
                 if sim.time >= next_snap - 1e-9:
-                    _, eps_cells = sim.void_fraction()
+                    eps_faces, eps_cells = sim.void_fraction()
                     snaps.write(sim.time, sim.store, sim.fluid, eps_cells)
-                    profile += channel.profile_rows(sim)
-                    write_channel_profile(profile, out / "channel_profile.csv")
+                    _write_snapshot_tables(sim, eps_faces, tables, out)
                     next_snap += fd.snapshot_interval
                 if signals.caught is not None:
                     write_time_series(time_series_frame(rows), out / "timeseries.csv")
@@ -523,6 +522,15 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     log(f"done: t = {sim.time:.6g} s, {sim.store.count} droplets in the slag; outputs in {out} "
         f"(timeseries.csv and timeseries.png, droplets.png, snapshots.pvd for ParaView, checkpoint.npz)")
     return frame
+
+
+def _write_snapshot_tables(sim, eps_faces, tables: dict[str, list[dict]], out: Path) -> None:
+    """Append the channel profile's and the zone diagnostics' rows at the current time to ``tables`` (file name ->
+    rows, :data:`settler.output.SNAPSHOT_TABLES`) and rewrite each file in ``out``."""
+    new = {"channel_profile.csv": channel.profile_rows(sim), **zones.snapshot_tables(sim, eps_faces)}
+    for name, columns in SNAPSHOT_TABLES.items():
+        tables[name] += new[name]
+        write_table(tables[name], columns, out / name)
 
 
 def _progress_extra(sim) -> str:

@@ -91,23 +91,85 @@ def band_edges(height: float, bands: int = PROFILE_BANDS) -> np.ndarray:
     return np.linspace(0.0, float(height), int(bands) + 1)
 
 
+#: Ring width of the return radius (``return_radius`` of :data:`ZONE_PROFILE`), in grid cells.
+RING_CELLS = 1.0
+#: The roof layer (:data:`ZONES`) extends down from the top while the slice volume fraction is at least this share
+#: of its peak in the upper half of the slag.
+ROOF_SHARE = 0.5
+
+#: Columns of ``zone_profile.csv`` (full engine, at every snapshot, the :data:`PROFILE_BANDS` bands of the channel
+#: profile): what the reduced model's zones (plume core, downflow skirt, return annulus) can be fitted to, besides
+#: the core's radius and axis velocity of :data:`CHANNEL_PROFILE`.
+ZONE_PROFILE: dict[str, tuple[str, str]] = {
+    "time": ("s", "simulated time of the snapshot"),
+    "z": ("m", "height of the band's centre above the bottom"),
+    "volume_fraction": ("-", "droplet volume with centres in the band over the band's volume (whole cross-section)"),
+    "core_volume_fraction": ("-", "droplet volume with centres in the band within the channel radius of the inlet "
+                                  "axis over that cylinder's volume (NaN: no channel radius in the band)"),
+    "upward_slag_flux": ("m^3/s", "slag volume flux upward through the horizontal plane at the band's centre: the "
+                                  "sum of eps w h^2 over the grid's z faces nearest to it with w > 0"),
+    "downward_slag_flux": ("m^3/s", "the same over the faces with w < 0, as a positive number"),
+    "return_radius": ("m", "distance from the inlet axis at which the ring-averaged slag velocity (rings RING_CELLS "
+                           "cells wide) on that plane turns from downward to upward, interpolated between ring "
+                           "centres (NaN: no downflow on the axis, or no turn inside the box)"),
+    "rising_volume": ("m^3", "volume of the droplets in the band that move upward (velocity z > 0)"),
+}
+#: Columns of ``zones.csv`` (full engine, one row per snapshot): the roof layer under the inlet, measured in the
+#: cylinder of the inlet radius around the inlet axis in slices one cell high.
+ZONES: dict[str, tuple[str, str]] = {
+    "time": ("s", "simulated time of the snapshot"),
+    "roof_thickness": ("m", "depth below the slag top of the roof layer: the slices from the top down to the last "
+                            "one, below the peak of the slice volume fraction in the upper half, whose fraction is at "
+                            "least ROOF_SHARE of the peak (0: no droplets in the upper half)"),
+    "roof_volume_fraction": ("-", "droplet volume in the roof layer over its volume (NaN for thickness 0)"),
+    "roof_peak_fraction": ("-", "the peak slice volume fraction in the upper half under the inlet"),
+    "rising_count": ("-", "droplets below the insertion layer moving upward (velocity z > 0)"),
+    "rising_volume": ("m^3", "their volume"),
+}
+#: Columns of ``lift_by_size.csv`` (full engine, one row per snapshot and occupied size bin, the bins of the
+#: merges-by-size table): the droplets carried back up by the return flow, by size.
+LIFT_BY_SIZE: dict[str, tuple[str, str]] = {
+    "time": ("s", "simulated time of the snapshot"),
+    "diameter_low": ("m", "lower edge of the size bin"),
+    "diameter_high": ("m", "upper edge of the size bin"),
+    "count": ("-", "droplets of the bin below the insertion layer"),
+    "rising_count": ("-", "those of them moving upward (velocity z > 0)"),
+    "rising_velocity": ("m/s", "mean upward velocity of the rising ones (NaN: none)"),
+}
+#: Tables a full run writes at every snapshot: file name -> columns (the zone diagnostics and the channel profile).
+SNAPSHOT_TABLES: dict[str, dict[str, tuple[str, str]]] = {
+    "channel_profile.csv": CHANNEL_PROFILE, "zone_profile.csv": ZONE_PROFILE, "zones.csv": ZONES,
+    "lift_by_size.csv": LIFT_BY_SIZE}
+
+
+def write_table(rows: list[dict], columns: dict[str, tuple[str, str]], path) -> None:
+    """Write ``rows`` (dicts with the keys of ``columns``, name -> (unit, meaning)) atomically as CSV, a units line
+    first."""
+    frame = pd.DataFrame(rows, columns=list(columns)).astype(float)
+    units = "# units: " + ", ".join(f"{k} [{u}]" for k, (u, _) in columns.items()) + "\n"
+    atomic_write_text(path, units + frame.to_csv(index=False))
+
+
+def read_table(path) -> pd.DataFrame:
+    """The rows of a CSV written by :func:`write_table`."""
+    return pd.read_csv(path, comment="#")
+
+
 def write_channel_profile(rows: list[dict], path) -> None:
     """Write the channel profile rows (keys of :data:`CHANNEL_PROFILE`) atomically as CSV with a units line."""
-    frame = pd.DataFrame(rows, columns=list(CHANNEL_PROFILE)).astype(float)
-    units = "# units: " + ", ".join(f"{k} [{u}]" for k, (u, _) in CHANNEL_PROFILE.items()) + "\n"
-    atomic_write_text(path, units + frame.to_csv(index=False))
+    write_table(rows, CHANNEL_PROFILE, path)
 
 
 def read_channel_profile(path) -> pd.DataFrame:
     """The rows of a ``channel_profile.csv``."""
-    return pd.read_csv(path, comment="#")
+    return read_table(path)
 
 
 #: Files a run of either engine writes into its output folder (plus the numbered snapshots of SNAPSHOT_PATTERNS):
 #: a folder holding any of them holds a run.
 RUN_FILES = ("case.toml", "metadata.json", "timeseries.csv", "timeseries.png", "summary.json", "checkpoint.npz",
              "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz", "merges_by_size.csv",
-             "channel_profile.csv")
+             "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv")
 SNAPSHOT_PATTERNS = ("droplets_*.vtu", "fluid_*.vtu")
 
 
