@@ -322,9 +322,15 @@ def run_files(folder) -> list[Path]:
     return found
 
 
+#: The packages whose git trees :func:`source_commit` records: two runs whose trees are equal ran the same engine,
+#: even at different commits (commits that changed only analysis/, tests/ or the documentation).
+ENGINE_PACKAGES = ("fulldem", "popbal", "settler")
+
+
 def source_commit() -> dict:
     """The git commit of the toolkit's source, if it runs from a git checkout: {"commit": hash or None, "dirty":
-    whether tracked files differ from it, or None}."""
+    whether tracked files differ from it, or None, "engine_trees": {package: git tree hash at that commit} of
+    :data:`ENGINE_PACKAGES` (absent outside a checkout)}."""
     import subprocess
 
     root = Path(__file__).resolve().parents[1]
@@ -337,7 +343,11 @@ def source_commit() -> dict:
                                 capture_output=True, text=True, timeout=10)
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": None}
-    return {"commit": commit.stdout.strip(), "dirty": bool(status.stdout.strip()) if status.returncode == 0 else None}
+    trees = subprocess.run(["git", "-C", str(root), "rev-parse"] + [f"HEAD:{p}" for p in ENGINE_PACKAGES],
+                           capture_output=True, text=True, timeout=10)
+    found = trees.stdout.split() if trees.returncode == 0 else []
+    return {"commit": commit.stdout.strip(), "dirty": bool(status.stdout.strip()) if status.returncode == 0 else None,
+            **({"engine_trees": dict(zip(ENGINE_PACKAGES, found))} if len(found) == len(ENGINE_PACKAGES) else {})}
 
 
 def write_run_metadata(out_dir: str | os.PathLike, case, engine: str, **extra) -> None:
