@@ -1,8 +1,13 @@
-"""Parameter sweeps of the reduced model (popbal): matte loss, settled fraction and droplet size over a grid or a
-sampled design of case keys, executed on dask.distributed, resumable point by point.
+"""Parameter sweeps of the reduced model (popbal) or of the full engine: matte loss, settled fraction and droplet
+size over a grid or a sampled design of case keys, or over a set of named runs, executed on dask.distributed,
+resumable point by point.
 
 ``settler sweep CASE key=v1,v2,... key2=a:b:n [--design grid|lhs|sobol|morris] [--samples N] [--out DIR]
-[--workers N] [--scheduler ADDRESS] [--seed S]`` (see :func:`add_arguments`) and :func:`sweep` from Python.
+[--workers N] [--scheduler ADDRESS] [--seed S] [--engine reduced|full]`` (see :func:`add_arguments`) and
+:func:`sweep` from Python; ``settler sweep --set FILE [--only a,b] [--engine full]`` and :func:`sweep_set` for a run
+set (:mod:`.runset`: named runs, each its own case, such as ``data/reference/design.toml``). With ``--engine full``
+every point is a fulldem run in its point folder that checkpoints as it goes and resumes from its checkpoint when the
+same command runs again.
 
 Axes (:func:`parse_axis`): ``section.key`` is a key of :data:`settler.cases.SCHEMA`; its values are
 
@@ -55,13 +60,15 @@ Result.save), imported in the tasks.
 from .axes import Axis, parse_axes, parse_axis
 from .command import add_arguments, main
 from .designs import DEFAULT_SAMPLES, DESIGNS, MORRIS_LEVELS, Design, build_design
-from .execution import (DONE_FILE, ERROR_FILE, METRICS, POINTS, Executor, SweepResult, check_workers, point_hash,
+from .execution import (DONE_FILE, ENGINES, ERROR_FILE, METRICS, POINTS, Executor, SweepResult, check_workers, point_hash,
                         read_done, run_point, summarize, sweep, warm_numba, write_netcdf)
 from .furnace import (FURNACE_AXES, FURNACE_BASE, FURNACE_MORRIS_TRAJECTORIES, FURNACE_QUICK, FURNACE_SOBOL_SAMPLES,
                       TREND_POINTS, furnace_study, plot_study, ranking)
 from .results import ANALYSED, PLOTTED, RESAMPLES, plot_sensitivity, plot_trends, sensitivity
+from .runset import RunSet, SetResult, SetRun, load_run_set, sweep_set
 
-__all__ = ["ANALYSED", "Axis", "DEFAULT_SAMPLES", "DESIGNS", "DONE_FILE", "Design", "ERROR_FILE", "Executor",
+__all__ = ["ANALYSED", "Axis", "DEFAULT_SAMPLES", "DESIGNS", "DONE_FILE", "Design", "ENGINES", "ERROR_FILE", "Executor",
+           "RunSet", "SetResult", "SetRun", "load_run_set", "sweep_set",
            "FURNACE_AXES", "FURNACE_BASE", "FURNACE_MORRIS_TRAJECTORIES", "FURNACE_QUICK", "FURNACE_SOBOL_SAMPLES",
            "METRICS", "MORRIS_LEVELS", "PLOTTED", "POINTS", "RESAMPLES", "SweepResult", "TREND_POINTS",
            "add_arguments", "build_design", "check_workers", "furnace_study", "main", "parse_axes", "parse_axis",

@@ -46,10 +46,27 @@ ERROR_FILE = "error.json"
 POINTS = "points"
 
 
-def point_hash(case: Case) -> str:
-    """16 hex digits of the SHA-256 of the resolved case (every key, sorted, as JSON): equal cases share a folder,
-    however their values were given."""
+#: Engines a sweep runs: ``reduced`` (popbal, seconds a point) or ``full`` (fulldem, minutes to hours a point).
+ENGINES = ("reduced", "full")
+#: Log of a full point's run (its progress lines: the grid, resumes, warnings), in the point's folder.
+RUN_LOG = "run.log"
+
+
+def check_engine(engine) -> None:
+    """CaseError unless ``engine`` is one of :data:`ENGINES`."""
+    if engine not in ENGINES:
+        raise CaseError(f"--engine {engine!r}: allowed: {', '.join(ENGINES)}")
+
+
+def point_hash(case: Case, engine: str = "reduced", droplets: str | None = None) -> str:
+    """16 hex digits of the SHA-256 of the resolved case (every key, sorted, as JSON), with the engine and the
+    initial droplet list's contents for full points: equal points share a folder, however their values were
+    given."""
     text = json.dumps(case.to_dict(), sort_keys=True, separators=(",", ":"))
+    if engine != "reduced":  # reduced points keep the hashes of the sweeps made before the full engine was offered
+        text = f"{engine}:" + text
+    if droplets:
+        text += ":droplets:" + hashlib.sha256(Path(droplets).read_bytes()).hexdigest()
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -75,24 +92,60 @@ def read_done(folder) -> dict | None:
         return None
 
 
-def run_point(case_dict: dict, folder: str, source: str = "", distribution: bool = False) -> dict:
-    """Run one point (the task a worker executes): popbal on the resolved case ``case_dict``, its output saved into
-    ``folder`` (popbal's Result.save; distribution.npz only if ``distribution``, as the table needs only the time
-    series), then ``done.json`` with :data:`METRICS` written last, atomically. An error is recorded in
-    ``error.json`` and returned (status 'failed'), not raised."""
+def _full_point(case: Case, folder: Path, droplets: str | None, command: str | None) -> tuple[pd.DataFrame, float]:
+    """Run the full engine on ``case`` into ``folder``, resuming from its checkpoint if an earlier task left one;
+    returns (time series, slag residence time [s], NaN without slag feed). Its log lines go to ``folder/run.log``."""
+    from fulldem.driver import run_case
+    from settler.output import read_time_series
+
+    folder.mkdir(parents=True, exist_ok=True)
+    log_path = folder / RUN_LOG
+
+    def log(text):
+        with open(log_path, "a", encoding="utf-8") as handle:
+            handle.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {text}\n")
+
+    end = case.fulldem.end_time
+    series_path = folder / "timeseries.csv"
+    finished = ((folder / "summary.json").is_file() and series_path.is_file()
+                and float(read_time_series(series_path)["time"].iloc[-1]) >= end - 1e-9)
+    if finished:  # the run ended but its task did not write done.json (killed in between)
+        frame = read_time_series(series_path)
+    else:
+        resume = (folder / "checkpoint.npz").is_file()
+        frame = run_case(case, folder, resume=resume, droplets=None if resume else droplets, progress=False,
+                         log=log, overwrite=not resume, command=command)
+    slag_flow = case.slag.feed_rate / case.slag.density  # m^3/s
+    volume = case.geometry.width * case.geometry.depth * case.geometry.height
+    return frame, (volume / slag_flow if slag_flow > 0.0 else math.nan)
+
+
+def run_point(case_dict: dict, folder: str, source: str = "", distribution: bool = False, engine: str = "reduced",
+              droplets: str | None = None, command: str | None = None) -> dict:
+    """Run one point (the task a worker executes) on the resolved case ``case_dict`` into ``folder``, then write
+    ``done.json`` with :data:`METRICS` last, atomically. ``engine`` 'reduced': popbal, its output saved by
+    Result.save (distribution.npz only if ``distribution``, as the table needs only the time series); 'full': a
+    fulldem run (``droplets``: an initial droplet list; ``command``: recorded in its metadata.json) that resumes
+    from the folder's checkpoint when an earlier task was interrupted. An error is recorded in ``error.json`` and
+    returned (status 'failed'), not raised."""
     if "numba" not in sys.modules:  # a fresh worker process: one Numba thread. Never once Numba is loaded: Numba
         os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # re-reads the variable and refuses a change (in-process runs)
-    import popbal
 
     started = time.perf_counter()
     folder = Path(folder)
-    record = {"hash": folder.name}
+    record = {"hash": folder.name, "engine": engine}
     try:
         case = resolve(case_dict, None, source)
-        result = popbal.run(popbal.setup(case), progress=False)
-        result.save(folder, distribution=distribution)
-        record.update(summarize(result.timeseries), slag_viscosity=case.slag_viscosity,
-                      residence_time=result.model.residence_time, status="done", error="",
+        if engine == "full":
+            frame, residence = _full_point(case, folder, droplets, command)
+        else:
+            import popbal
+
+            result = popbal.run(popbal.setup(case), progress=False)
+            result.save(folder, distribution=distribution)
+            frame, residence = result.timeseries, result.model.residence_time
+        record.update(summarize(frame), slag_viscosity=case.slag_viscosity,
+                      residence_time=residence, status="done", error="",
                       wall_time=time.perf_counter() - started)
         text = to_json(record)
         atomic_write_text(folder / DONE_FILE, text)
@@ -120,9 +173,25 @@ def _warm_cases(cases: list[Case], design: Design) -> list[Case]:
     return picked
 
 
-def warm_numba(case_dicts: list[dict]) -> None:
-    """Fill (or load) the Numba cache with a tiny run of each case: 4 cells, one section per doubling, three time
-    steps. Errors are left to the points themselves."""
+def warm_numba(case_dicts: list[dict], engine: str = "reduced") -> None:
+    """Fill (or load) the Numba cache with a tiny run of each case: popbal on 4 cells, one section per doubling,
+    three time steps; fulldem for two fluid steps (feed, coalescence, reaction and exits as the case has them) in a
+    temporary folder. Errors are left to the points themselves."""
+    if engine == "full":
+        import tempfile
+
+        from fulldem.driver import run_case
+
+        for case_dict in case_dicts:
+            try:
+                case = resolve(case_dict)
+                tiny = case.replace(fulldem__end_time=2.0 * case.fulldem.fluid_step, fulldem__snapshot_interval=0.0,
+                                    fulldem__output_interval=case.fulldem.fluid_step)
+                with tempfile.TemporaryDirectory(prefix="settler-warm-") as tmp:
+                    run_case(tiny, Path(tmp) / "run", progress=False, log=lambda text: None)
+            except Exception:  # noqa: BLE001 -- the same error is recorded when the point runs
+                continue
+        return
     import popbal
 
     for case_dict in case_dicts:
@@ -201,16 +270,16 @@ class Executor:
             return f"dask cluster {self.client.scheduler.address}"
         return f"LocalCluster of {self.workers} worker processes, 1 thread each"
 
-    def warm_workers(self, case_dicts: list[dict]) -> None:
+    def warm_workers(self, case_dicts: list[dict], engine: str = "reduced") -> None:
         """On an external cluster, warm each worker's Numba cache in turn (never two at once)."""
         if self.local or not self.external:
             return
         for address in sorted(self.client.scheduler_info()["workers"]):
-            self.client.run(warm_numba, case_dicts, workers=[address])
+            self.client.run(warm_numba, case_dicts, engine, workers=[address])
 
-    def map(self, tasks: list[tuple[dict, str, str, bool]], progress: bool):
-        """Yield the record of each task (case_dict, folder, source, distribution) as it finishes, with a tqdm
-        bar."""
+    def map(self, tasks: list[tuple], progress: bool):
+        """Yield the record of each task (the arguments of :func:`run_point`: case_dict, folder, source,
+        distribution[, engine, droplets, command]) as it finishes, with a tqdm bar."""
         from tqdm.auto import tqdm
 
         with tqdm(total=len(tasks), desc="sweep", unit="point", disable=not progress or not tasks) as bar:
@@ -257,8 +326,10 @@ class SweepResult:
 
 def sweep(case, axes, design: str = "grid", samples: int | None = None, out="sweep", workers: int | None = None,
           scheduler: str | None = None, seed: int = 0, points_dir=None, client=None, progress: bool = True,
-          plots: bool = True, command_line: str | None = None, distribution: bool = False) -> SweepResult:
-    """Run popbal over a design of case keys and write the table, netCDF, plots (and sensitivity) into ``out``.
+          plots: bool = True, command_line: str | None = None, distribution: bool = False,
+          engine: str = "reduced") -> SweepResult:
+    """Run popbal (``engine`` 'reduced', the default) or the full engine ('full': each point a resumable fulldem
+    run) over a design of case keys and write the table, netCDF, plots (and sensitivity) into ``out``.
 
     case: a preset name, a TOML path or a :class:`settler.cases.Case`. axes: ``["section.key=SPEC", ...]`` or
     ``{"section.key": SPEC or [values]}`` (:func:`parse_axis`). design, samples, seed: see the module docstring.
@@ -272,6 +343,7 @@ def sweep(case, axes, design: str = "grid", samples: int | None = None, out="swe
     """
     started = time.perf_counter()
     check_workers(workers)
+    check_engine(engine)
     base = case if isinstance(case, Case) else case_with_overrides(case)
     parsed = parse_axes(axes, base)
     plan = build_design(parsed, design, samples, seed)
@@ -279,7 +351,7 @@ def sweep(case, axes, design: str = "grid", samples: int | None = None, out="swe
     points = Path(points_dir) if points_dir is not None else out / POINTS
     fixed_base = case_with_overrides(base, plan.fixed) if plan.fixed else base
     cases, errors = _point_cases(fixed_base, plan)
-    hashes = [point_hash(c) if c is not None else "" for c in cases]
+    hashes = [point_hash(c, engine) if c is not None else "" for c in cases]
     records, tasks = {}, {}
     for case_, digest in zip(cases, hashes):
         if case_ is None or digest in records or digest in tasks:
@@ -288,7 +360,8 @@ def sweep(case, axes, design: str = "grid", samples: int | None = None, out="swe
         if done is not None:
             records[digest] = {**done, "resumed": True}
         else:
-            tasks[digest] = (case_.to_dict(), str(points / digest), base.source, distribution)
+            tasks[digest] = (case_.to_dict(), str(points / digest), base.source, distribution, engine, None,
+                             f"{command_line or 'analysis.sweep.sweep'} (point {digest})")
     # no cluster is started when every point is done
     with Executor(workers if tasks else 0, scheduler if tasks else None, client) as executor:
         if progress:
@@ -297,14 +370,14 @@ def sweep(case, axes, design: str = "grid", samples: int | None = None, out="swe
         if tasks and not executor.local:  # one process fills the cache as it goes; several must not
             warm = [c.to_dict() for c in _warm_cases([c if h in tasks else None for c, h in zip(cases, hashes)],
                                                       plan)]
-            warm_numba(warm)
-            executor.warm_workers(warm)
+            warm_numba(warm, engine)
+            executor.warm_workers(warm, engine)
         for record in executor.map(list(tasks.values()), progress):
             records[record["hash"]] = {**record, "resumed": False}
     table = _table(plan, hashes, records, errors)
     result = SweepResult(table, plan, out, ran=len(tasks), skipped=len(set(records) - set(tasks)),
                          failed=int(sum(r.get("status") != "done" for r in records.values())) + len(errors))
-    _write_outputs(result, base, points, command_line, plots, seed)
+    _write_outputs(result, base, points, command_line, plots, seed, engine)
     result.wall_time = time.perf_counter() - started
     return result
 
@@ -345,7 +418,8 @@ def _units_line(plan: Design) -> str:
     return "# units: " + ", ".join(units) + "\n"
 
 
-def _write_outputs(result: SweepResult, base: Case, points: Path, command_line, plots: bool, seed: int) -> None:
+def _write_outputs(result: SweepResult, base: Case, points: Path, command_line, plots: bool, seed: int,
+                   engine: str = "reduced") -> None:
     out, plan, table = result.out, result.design, result.table
     atomic_write_text(out / "sweep.csv", _units_line(plan) + table.to_csv(index=False))
     result.files.append(out / "sweep.csv")
@@ -364,7 +438,7 @@ def _write_outputs(result: SweepResult, base: Case, points: Path, command_line, 
         for axis in plan.swept:
             path = out / f"sweep_{axis.key}.png"
             result.files.append(_save_png(plot_trends(table, plan, axis.key, base.case.name), path))
-    meta = {"case": base.case.name, "case_source": base.source, "design": plan.name, "seed": seed,
+    meta = {"case": base.case.name, "case_source": base.source, "engine": engine, "design": plan.name, "seed": seed,
             "axes": {a.key: {"spec": a.spec, "unit": a.unit, "values": a.values, "low": a.low, "high": a.high,
                              "log": a.log} for a in plan.swept},
             "fixed": plan.fixed, "points": len(table), "distinct_points": int(table["hash"].replace("", np.nan)

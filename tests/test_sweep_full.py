@@ -1,0 +1,123 @@
+"""``settler sweep --engine full`` and run sets (``--set FILE``): each point a fulldem run in its hash-keyed folder,
+its metrics those of its own time series, an interrupted point resumed from its checkpoint to the same end, and a
+refused set file named key by key."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from analysis.sweep import DONE_FILE, load_run_set, point_hash, summarize, sweep, sweep_set
+from settler.cases import CaseError, load_case
+from settler.output import read_time_series
+
+#: A demo run of 5 fluid steps of 4 ms with feed and coalescence: seconds once the kernels are compiled.
+SHORT = {"fulldem.end_time": 0.02, "fulldem.output_interval": 0.004, "fulldem.snapshot_interval": 0.0}
+
+
+def _write_set(tmp_path, body: str):
+    path = tmp_path / "set.toml"
+    path.write_text(body)
+    return path
+
+
+def _short_set(tmp_path):
+    overrides = ", ".join(f'"{k}" = {v}' for k, v in SHORT.items())
+    return _write_set(tmp_path, f"""
+[set]
+description = "two short demo runs"
+
+[runs.base]
+case = "demo"
+overrides = {{ {overrides} }}
+family = "feed"
+
+[runs.double]
+case = "demo"
+overrides = {{ {overrides}, "feed.mass_rate" = 0.004 }}
+family = "feed"
+purpose = "twice the feed"
+""")
+
+
+def test_a_run_set_of_full_runs_records_each_runs_own_metrics(tmp_path):
+    path = _short_set(tmp_path)
+    result = sweep_set(path, "full", tmp_path / "out", workers=0, progress=False, command_line="test")
+    assert list(result.table["name"]) == ["base", "double"] and (result.table["status"] == "done").all()
+    assert result.ran == 2 and result.failed == 0
+    for row in result.table.to_dict("records"):
+        folder = tmp_path / "out" / "points" / row["hash"]
+        series = read_time_series(folder / "timeseries.csv")
+        assert series["time"].iloc[-1] == pytest.approx(0.02)
+        expected = summarize(series)
+        for key, value in expected.items():
+            assert row[key] == pytest.approx(value, rel=1e-12, nan_ok=True)
+        meta = json.loads((folder / "metadata.json").read_text())
+        assert meta["engine"] == "fulldem" and "run " + row["name"] in meta["command"]
+        assert set(meta["engine_trees"]) == {"fulldem", "popbal", "settler"}
+    fed = result.table.set_index("name")
+    # twice the feed rate places twice the matte over the same 0.02 s, to one droplet's mass
+    base = read_time_series(tmp_path / "out" / "points" / fed.loc["base", "hash"] / "timeseries.csv")
+    double = read_time_series(tmp_path / "out" / "points" / fed.loc["double", "hash"] / "timeseries.csv")
+    droplet = 1e-3 ** 3 * math.pi / 6 * 5200.0
+    assert double["mass_fed"].iloc[-1] == pytest.approx(2 * base["mass_fed"].iloc[-1], abs=3 * droplet)
+    # a second run of the command reads the finished runs back
+    again = sweep_set(path, "full", tmp_path / "out", workers=0, progress=False)
+    assert again.ran == 0 and again.skipped == 2 and again.table["resumed"].all()
+    info = json.loads((tmp_path / "out" / "sweep.json").read_text())
+    assert info["engine"] == "full" and set(info["runs"]) == {"base", "double"}
+
+
+def test_an_interrupted_full_point_resumes_from_its_checkpoint(tmp_path):
+    """A point left with a checkpoint at 0.012 s and no done.json (its worker killed) continues from there: the
+    resumed run says so in its log, reaches the end time, and its time series matches an uninterrupted run's."""
+    from fulldem.driver import run_case
+
+    case = load_case("demo", [f"{k}={v}" for k, v in SHORT.items()])
+    digest = point_hash(case, "full")
+    folder = tmp_path / "out" / "points" / digest
+    run_case(case, folder, end_time=0.012, progress=False, log=lambda text: None)
+    assert not (folder / DONE_FILE).exists()
+    result = sweep(case, {}, out=tmp_path / "out", workers=0, progress=False, plots=False, engine="full")
+    assert result.table["hash"].tolist() == [digest] and result.table["status"].tolist() == ["done"]
+    assert "resumed from" in (folder / "run.log").read_text()
+    resumed = read_time_series(folder / "timeseries.csv")
+    whole = run_case(case, tmp_path / "whole", progress=False, log=lambda text: None)
+    columns = [c for c in resumed.columns if c != "wall_time"]
+    np.testing.assert_allclose(resumed[columns].to_numpy(), whole[columns].to_numpy(), rtol=1e-12, atol=0.0)
+
+
+def test_full_and_reduced_points_of_one_case_have_their_own_folders():
+    case = load_case("demo")
+    assert point_hash(case) != point_hash(case, "full")
+    assert point_hash(case, "full") == point_hash(load_case("demo"), "full")
+
+
+@pytest.mark.parametrize("body, message", [
+    ('[runs.a]\ncase = "demo"\ncolour = "red"\n', "unknown key(s) colour"),
+    ('[runs.a]\noverrides = {}\n', "case = None"),
+    ('[runs."a b"]\ncase = "demo"\n', "the name must be"),
+    ('[runs.a]\ncase = "demo"\noverrides = { "slag.viscosity_reference" = -1.0 }\n', "run 'a'"),
+    ('[runs.a]\ncase = "demo"\ndroplets = "none.csv"\n', "no such file"),
+    ('[set]\n', "no [runs.NAME] tables"),
+    ('[runz.a]\ncase = "demo"\n', "unknown table(s) runz"),
+])
+def test_a_bad_run_set_is_refused_naming_the_key(tmp_path, body, message):
+    with pytest.raises(CaseError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[")
+                       .replace("]", r"\]")):
+        load_run_set(_write_set(tmp_path, body))
+
+
+def test_settler_sweep_set_refuses_a_case_and_only_without_set(tmp_path, capsys):
+    from settler.cli import main
+
+    path = _short_set(tmp_path)
+    assert main(["sweep", "demo", "--set", str(path), "--out", str(tmp_path / "o")]) == 2
+    assert "allowed: --set alone" in capsys.readouterr().err
+    assert main(["sweep", "demo", "feed.mass_rate=0.001,0.002", "--only", "base", "--out", str(tmp_path / "o")]) == 2
+    assert "--only base: allowed only with --set" in capsys.readouterr().err
+    assert main(["sweep", "--set", str(path), "--only", "nothing", "--out", str(tmp_path / "o")]) == 2
+    assert "--only nothing: not in" in capsys.readouterr().err
+    assert main(["sweep", "--engine", "full", "--out", str(tmp_path / "o")]) == 2
+    assert "no CASE" in capsys.readouterr().err
