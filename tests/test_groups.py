@@ -1,0 +1,64 @@
+"""The controlling groups of analysis.groups against the closed forms they come from (shared/reference/
+reduced-model.md section 2: the confined Stokes plume's c(R/a) table, the Richardson-Zaki flux peak), and the
+reference set's design file: every run a valid case the full engine accepts."""
+
+import math
+
+import pytest
+
+from analysis.groups import KYNCH_PEAK, confinement_factor, design_groups, measured_groups
+from settler.cases import load_case
+
+
+def test_confinement_factor_reproduces_the_confined_plume_table():
+    # reduced-model.md: R/a 20, 10, 5, 3.3, 2 -> c 1.39, 1.05, 0.71, 0.51, 0.29 (two decimals)
+    for ratio, c in ((20, 1.39), (10, 1.05), (5, 0.71), (3.3, 0.51), (2, 0.29)):
+        assert confinement_factor(ratio) == pytest.approx(c, abs=0.005)
+    assert math.isnan(confinement_factor(1.0))
+
+
+def test_kynch_peak_is_the_richardson_zaki_maximum():
+    # phi (1 - phi)^4.65 peaks at phi = 1/5.65 = 0.177 with 0.0715 (reduced-model.md, feed layer)
+    best = max(p / 10000 * (1 - p / 10000) ** 4.65 for p in range(1, 10000))
+    assert KYNCH_PEAK == pytest.approx(best, rel=1e-6) and KYNCH_PEAK == pytest.approx(0.0715, abs=5e-5)
+
+
+def test_design_groups_of_the_demo():
+    case = load_case("demo")
+    g = design_groups(case)
+    d, mu = case.feed.mean_diameter, case.slag_viscosity
+    u_s = (case.matte.density - case.slag.density) * 9.80665 * d * d / (18 * mu)
+    assert g["stokes_velocity"] == pytest.approx(u_s, rel=1e-12)
+    a = case.geometry.inlet_diameter / 2
+    flux = case.feed.mass_rate / case.matte.density / (math.pi * a * a)
+    assert g["kynch_ratio"] == pytest.approx(flux / (0.0715455 * u_s), rel=1e-5)
+    assert g["column_to_inlet"] == pytest.approx(0.1 / math.sqrt(math.pi) / a, rel=1e-12)
+    # twice the feed: the plume velocity grows as its square root
+    double = design_groups(load_case("demo", [f"feed.mass_rate={2 * case.feed.mass_rate!r}"]))
+    assert double["plume_velocity"] == pytest.approx(math.sqrt(2) * g["plume_velocity"], rel=1e-12)
+
+
+def test_measured_groups_take_the_last_third_of_the_run():
+    import pandas as pd
+
+    case = load_case("demo")
+    frame = pd.DataFrame({"time": [0.0, 1.0, 2.0, 3.0], "channel_radius": [1.0, 1.0, 0.01, 0.02],
+                          "channel_velocity": [9.0, 9.0, 0.03, 0.05]})
+    g = measured_groups(frame, case)
+    assert g["channel_radius"] == pytest.approx(0.015) and g["channel_velocity"] == pytest.approx(0.04)
+    assert g["channel_reynolds"] == pytest.approx(case.slag.density * 0.04 * 0.015 / case.slag_viscosity)
+
+
+def test_the_reference_design_is_a_set_of_valid_full_runs():
+    from pathlib import Path
+
+    from analysis.sweep import load_run_set
+    from fulldem.driver import check_case
+
+    path = Path(__file__).resolve().parents[1] / "data" / "reference" / "design.toml"
+    runs = load_run_set(path).runs
+    assert {"simple", "cubic", "deep", "kernel"} <= {r.name for r in runs}
+    for run in runs:
+        check_case(run.case)  # raises CaseError on a case the engine refuses
+    kernel = next(r for r in runs if r.name == "kernel")
+    assert kernel.droplets is not None and Path(kernel.droplets).is_file()
