@@ -1,0 +1,62 @@
+"""analysis.evidence on constructed data with known answers: the steady rule on a ramp followed by exact burst
+cycles, the rim test on a core and a ring, and the collision efficiency of a uniform two-size suspension against the
+gravitational kernel pi (a_s + a_l)^2 |dU| n_s n_l V."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analysis.evidence import collision_efficiency, pair_exposure, rim_share, seed_scatter, steady_means, steady_window
+
+
+def _bursting(ramp_end=13.0, amplitude=0.07, end=45.0):
+    t = np.round(np.arange(0.0, end + 1e-9, 0.1), 10)
+    y = 1e5 * np.minimum(t / ramp_end, 1.0) * (1.0 + amplitude * np.sin(2 * np.pi * t / 5.0))
+    return pd.DataFrame({"time": t, "droplet_count": y})
+
+
+def test_steady_window_starts_at_the_first_whole_cycle_after_the_rise():
+    window = steady_window(_bursting())
+    # blocks back from 45 s: (10, 15] holds the ramp's end (mean 3 % low), (15, 20] ... (40, 45] are exact cycles
+    assert window["start"] == pytest.approx(15.0) and window["cycles"] == 6
+    assert window["mean"] == pytest.approx(1e5, rel=1e-9) and window["spread"] < 1e-9
+    # a rise that never ends is not steady
+    rising = _bursting()
+    rising["droplet_count"] *= 1 + rising["time"] / 45.0
+    assert math.isnan(steady_window(rising)["start"])
+    means = steady_means(_bursting(), ["droplet_count"], 15.0)
+    assert means["droplet_count"] == pytest.approx(1e5, rel=1e-9)
+    assert seed_scatter({"a": 2.0}, {"a": 2.1})["a"] == pytest.approx(0.05)
+
+
+def test_rim_share_of_a_core_and_a_ring():
+    rng = np.random.default_rng(1)
+    core = pd.DataFrame({"x": rng.uniform(-1e-3, 1e-3, 100), "y": rng.uniform(-1e-3, 1e-3, 100), "z": 0.2,
+                         "diameter": 1e-3, "age": 1.0, "merged": 1.0})
+    angle = np.linspace(0, 2 * np.pi, 10, endpoint=False)
+    ring = pd.DataFrame({"x": 0.01 * np.cos(angle), "y": 0.01 * np.sin(angle), "z": 0.2, "diameter": 1e-3,
+                         "age": [100.0] * 4 + [1.0] * 6, "merged": [0.0] * 4 + [1.0] * 6})
+    below = ring.assign(z=0.05, merged=0.0, age=100.0)  # outside the band: ignored
+    result = rim_share(pd.concat([core, ring, below]), (0.0, 0.0), 0.15, 0.35)
+    assert result["outside"] == 10 and result["rim"] == 4 and result["share"] == pytest.approx(0.4)
+    assert result["median_age"] == 1.0 and result["half_volume_radius"] < 2e-3
+
+
+def test_collision_efficiency_of_a_uniform_suspension():
+    ds, dl, us, ul = 0.5e-3, 1.0e-3, 0.6e-3, 2.5e-3
+    area, height, ns, nl = 0.01, 0.08, 3000, 2000
+    rng = np.random.default_rng(2)
+    snapshots = []
+    for time in np.arange(0.0, 10.01, 0.5):
+        z = rng.uniform(0.0, height, ns + nl)
+        # one 0.08 m slice: N_s N_l / V exactly, whatever the positions
+        snapshots.append((time, pd.DataFrame({"z": z, "diameter": [ds] * ns + [dl] * nl,
+                                              "settling_velocity": [us] * ns + [ul] * nl})))
+    exposure = pair_exposure(snapshots, (0.4e-3, 0.6e-3), (0.9e-3, 1.1e-3), area, height)
+    expected = math.pi * (0.75e-3) ** 2 * (ul - us) * ns * nl / (area * height) * 10.0
+    result = collision_efficiency(round(0.5 * expected), exposure, ds, dl)
+    assert result["expected_collisions"] == pytest.approx(expected, rel=1e-12)
+    assert result["efficiency"] == pytest.approx(0.5, abs=1.0 / expected)
+    assert result["standard_error"] == pytest.approx(0.5 / math.sqrt(round(0.5 * expected)), rel=0.01)
