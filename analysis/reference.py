@@ -358,11 +358,20 @@ def _info(run, name, command, commit, metadata, summary, last, usable, chosen, d
     elif chosen:
         end_count = int(len(droplets[chosen[-1]]["diameter"]))
     files = {p.name: p.stat().st_size for p in sorted(tmp.iterdir()) if p.is_file() and p.name != INFO_FILE}
+    meta = metadata if isinstance(metadata, dict) else {}
+    try:
+        from settler.cases import load_case
+
+        seed = int(load_case(run / "case.toml").feed.seed)
+    except Exception:  # noqa: BLE001 -- an unreadable case is noted elsewhere; the seed is then unknown
+        seed = None
     return {
         "case_name": name,
-        "source": str(run.resolve()),
         "command": command,
         "commit": commit,
+        "dirty": meta.get("dirty"),
+        "engine_trees": meta.get("engine_trees"),
+        "seed": seed,
         "end_time": None if last is None else float(last["time"]),
         "wall_time": None if last is None or "wall_time" not in last else float(last["wall_time"]),
         "droplets_at_end": end_count,
@@ -375,9 +384,28 @@ def _info(run, name, command, commit, metadata, summary, last, usable, chosen, d
         "total_bytes": int(sum(files.values())),
         "precision": FLOAT32_NOTE,
         "notes": list(notes),
-        "metadata": metadata,
+        "metadata": _portable(metadata, command),
         "summary": summary,
     }
+
+
+def _portable(metadata, command):
+    """metadata.json as stored: its command replaced by ``command`` and a case source inside a checkout's data/
+    folder named from there (``data/cases/simple.toml``), so that provenance names commands, not this machine's
+    folders."""
+    if not isinstance(metadata, dict):
+        return metadata
+    out = dict(metadata)
+    if command is not None and "command" in out:
+        out["command"] = command
+    source = out.get("case_source")
+    if isinstance(source, str) and Path(source).is_absolute():
+        parts = Path(source).parts
+        if "data" in parts:
+            out["case_source"] = "/".join(parts[len(parts) - 1 - parts[::-1].index("data"):])
+        else:
+            out["case_source"] = Path(source).name
+    return out
 
 
 def _replace(tmp: Path, dest: Path) -> None:
@@ -526,13 +554,16 @@ def main(argv=None) -> int:
     parser.add_argument("--dest", default="data/reference", help="where references lie (default: data/reference)")
     parser.add_argument("--snapshots", type=int, default=4,
                         help="droplet snapshots to keep, spread evenly in time, the last always (default: 4)")
+    parser.add_argument("--command", default=None,
+                        help="the command that made the run, as a user would type it (default: the one in its "
+                             "metadata.json, which names this machine's folders)")
     parser.add_argument("--commit", default=None,
                         help="git commit of the code that made the run (default: the one in its metadata.json, "
                              "else this checkout's)")
     args = parser.parse_args(argv)
     try:
         folder = store_reference(args.run, args.case_name, dest_root=args.dest, snapshots=args.snapshots,
-                                 commit=args.commit)
+                                 command=args.command, commit=args.commit)
     except ValueError as exc:  # StoreError, and unreadable CSV files (pandas raises ValueError subclasses)
         print(f"{parser.prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
