@@ -60,6 +60,7 @@ FIGURE_FILES = {
     "density_height": "fig20_density_height.png",
     "velocity_height": "fig21_velocity_height.png",
     "channel": "channel.png",
+    "zones": "zones.png",
 }
 #: Resolution of the PNGs of :func:`render_all` [dots per inch].
 DPI = 120
@@ -307,6 +308,74 @@ def channel(run, time=None) -> Figure:
     return fig
 
 
+def _table(run, name) -> pd.DataFrame | None:
+    path = check_run(run) / name
+    if not path.is_file():
+        return None
+    frame = pd.read_csv(path, comment="#")
+    return frame if len(frame) else None
+
+
+def zones(run) -> Figure:
+    """The zone diagnostics of a full run (:data:`settler.output.ZONE_PROFILE`, ZONES, LIFT_BY_SIZE), profiles
+    averaged over the snapshots of the last third of the run: the channel (core) radius and the return radius
+    against height, with the column's equivalent radius sqrt(W D / pi); the slag's upward and downward volume flux
+    against height; the roof layer's thickness and the droplets moving up against time; and the share of each size
+    moving up. Skipped (NoData) for a run without zone files (popbal runs, runs made before they existed)."""
+    profile, scalars, lift = (_table(run, n) for n in ("zone_profile.csv", "zones.csv", "lift_by_size.csv"))
+    if profile is None or scalars is None:
+        raise NoData("no zone_profile.csv / zones.csv (full runs write them at every snapshot)")
+    channel_rows = _table(run, "channel_profile.csv")
+    name = _case_name(run)
+    end = float(profile["time"].max())
+    late = profile[profile["time"] >= end * 2.0 / 3.0]
+    mean = late.groupby("z").mean(numeric_only=True).reset_index()
+    fig = Figure(figsize=(12, 8.5), layout="constrained")
+    (radius_ax, flux_ax), (roof_ax, lift_ax) = fig.subplots(2, 2)
+    window = f"t = {late['time'].min():g}–{end:g} s"
+    if channel_rows is not None:
+        core = channel_rows[channel_rows["time"] >= end * 2.0 / 3.0].groupby("z").mean(numeric_only=True)
+        radius_ax.plot(1e3 * core["channel_radius"], 1e3 * core.index, "o-", color="C0", label="channel (core) radius")
+    radius_ax.plot(1e3 * mean["return_radius"], 1e3 * mean["z"], "s-", color="C3", label="return radius (flow turns up)")
+    case = _case(run)
+    if case is not None:
+        radius_ax.axvline(1e3 * math.sqrt(case.geometry.width * case.geometry.depth / math.pi), color="0.5", ls="--",
+                          label="column radius sqrt(W D / pi)")
+    radius_ax.set_xlabel("radius from the inlet axis [mm]")
+    radius_ax.set_ylabel("height above the bottom [mm]")
+    radius_ax.set_title(f"{name}: plume core and return flow, mean over {window}", fontsize="medium")
+    radius_ax.legend(fontsize="small")
+    flux_ax.plot(1e6 * mean["upward_slag_flux"], 1e3 * mean["z"], "o-", color="C1", label="upward")
+    flux_ax.plot(1e6 * mean["downward_slag_flux"], 1e3 * mean["z"], "o-", color="C2", label="downward")
+    flux_ax.set_xlabel("slag volume flux through the plane [cm^3/s]")
+    flux_ax.set_ylabel("height above the bottom [mm]")
+    flux_ax.set_title(f"slag flux, mean over {window}", fontsize="medium")
+    flux_ax.legend(fontsize="small")
+    roof_ax.plot(scalars["time"], 1e3 * scalars["roof_thickness"], "o-", color="C0", label="roof layer thickness")
+    roof_ax.set_xlabel("time [s]")
+    roof_ax.set_ylabel("roof layer thickness under the inlet [mm]", color="C0")
+    other = roof_ax.twinx()
+    other.plot(scalars["time"], scalars["rising_count"], "s-", color="C3", label="droplets moving up")
+    other.set_ylabel("droplets moving up (below the insertion layer)", color="C3")
+    roof_ax.set_title("roof layer and lift-back", fontsize="medium")
+    if lift is not None:
+        late_lift = lift[lift["time"] >= end * 2.0 / 3.0]
+        by = late_lift.groupby(["diameter_low", "diameter_high"])[["count", "rising_count"]].sum().reset_index()
+        by = by[by["count"] > 0]
+        centre = np.sqrt(by["diameter_low"].clip(lower=1e-6) * by["diameter_high"].replace(np.inf, np.nan)
+                         .fillna(by["diameter_low"] * 2 ** (1 / 3)))
+        lift_ax.semilogx(1e3 * centre, by["rising_count"] / by["count"], "o-")
+        lift_ax.set_xlabel("droplet diameter [mm] (bin centre)")
+        lift_ax.set_ylabel("share moving up [-]")
+        lift_ax.set_title(f"droplets carried up by size, {window}", fontsize="medium")
+    else:
+        lift_ax.text(0.5, 0.5, "no lift_by_size.csv", ha="center", transform=lift_ax.transAxes)
+        lift_ax.set_axis_off()
+    for ax in (radius_ax, flux_ax, roof_ax, lift_ax):
+        ax.grid(alpha=0.3)
+    return fig
+
+
 # ---------------------------------------------------------------------------------------------- snapshot figures
 def _droplets_present(run, time):
     t, frame = read_droplets(run, time)
@@ -465,6 +534,7 @@ def figure_functions(time=None) -> dict:
         "density_height": lambda run: density_height(run, time),
         "velocity_height": lambda run: velocity_height(run, time),
         "channel": lambda run: channel(run, time),
+        "zones": zones,
     }
 
 

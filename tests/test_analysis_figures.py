@@ -13,7 +13,8 @@ import pytest
 
 from analysis import figures
 from settler.cases import load_case
-from settler.output import time_series_frame, write_channel_profile, write_time_series
+from settler.output import (LIFT_BY_SIZE, ZONE_PROFILE, ZONES, time_series_frame, write_channel_profile,
+                            write_table, write_time_series)
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -106,6 +107,15 @@ def _make_run(folder, snapshots=True, empty_last=False):
         profile = [{"time": t, "z": z, "channel_radius": 0.01 + 0.1 * z, "channel_velocity": 0.02 - 0.1 * z,
                     "droplet_volume": 1e-9} for t in TIMES for z in np.linspace(0.005, 0.095, 10)]
         write_channel_profile(profile, folder / "channel_profile.csv")
+        zone = [{"time": t, "z": z, "volume_fraction": 0.01, "core_volume_fraction": 0.05, "upward_slag_flux": 1e-6,
+                 "downward_slag_flux": 1.1e-6, "return_radius": 0.02 + 0.1 * z, "rising_volume": 1e-10}
+                for t in TIMES for z in np.linspace(0.005, 0.095, 10)]
+        write_table(zone, ZONE_PROFILE, folder / "zone_profile.csv")
+        write_table([{"time": t, "roof_thickness": 0.005, "roof_volume_fraction": 0.1, "roof_peak_fraction": 0.12,
+                      "rising_count": 3, "rising_volume": 1e-10} for t in TIMES], ZONES, folder / "zones.csv")
+        write_table([{"time": t, "diameter_low": lo, "diameter_high": lo * 2 ** (1 / 3), "count": 10,
+                      "rising_count": 2, "rising_velocity": 1e-3} for t in TIMES for lo in (4e-4, 5e-4)],
+                    LIFT_BY_SIZE, folder / "lift_by_size.csv")
     return written
 
 

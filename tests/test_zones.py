@@ -97,6 +97,9 @@ def test_zone_files_of_a_short_settling_run(tmp_path):
     assert lift.groupby("time")["count"].sum().to_numpy() == pytest.approx([n, n, n])
     from analysis import load_run
 
+    from analysis.figures import render_all
+
+    assert render_all(out, tmp_path / "figures")["zones"] == tmp_path / "figures" / "zones.png"
     run = load_run(out)
     assert set(run.zones) == {"zone_profile", "zones", "lift_by_size"}
     assert run.zones["zones"]["roof_thickness"].to_numpy() == pytest.approx(read_table(out / "zones.csv")
