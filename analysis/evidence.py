@@ -135,3 +135,118 @@ def collision_efficiency(merges: int, exposure: dict, diameter_small: float, dia
     relative = math.sqrt((1.0 / merges if merges > 0 else math.inf) + (du_error / mean_du) ** 2)
     return {"efficiency": efficiency, "standard_error": efficiency * relative, "expected_collisions": expected,
             "merges": int(merges), "velocity_difference": mean_du}
+
+
+def _bin_of(diameter: float, edges: np.ndarray) -> tuple[float, float]:
+    """The merges-by-size bin (low, high] [m] that holds ``diameter`` (edges of fulldem's SIZE_BINS)."""
+    bounds = np.concatenate([[0.0], edges, [np.inf]])
+    b = int(np.searchsorted(edges, diameter, side="right"))
+    return float(bounds[b]), float(bounds[b + 1])
+
+
+def kernel_run_efficiency(run_folder, diameter_small: float = 0.5e-3, diameter_large: float = 1.0e-3,
+                          slice_height: float | None = None) -> dict:
+    """The collision efficiency of a kernel run (two sizes settling without feed; the reference set's 'kernel'):
+    the merges between the bins of the two fed sizes (``merges_by_size.csv``) over the gravitational collisions of
+    :func:`collision_efficiency`, with the exposure and velocities from every droplet snapshot of the run folder
+    (each size counted within its merges-by-size bin; slices of one cell height unless ``slice_height`` [m]).
+    Returns the result of :func:`collision_efficiency` plus "bins" and "snapshots"."""
+    from fulldem.submodels.coalescence import SIZE_BINS
+
+    from .figures import read_droplets
+    from .runs import load_run
+
+    run = load_run(run_folder)
+    if run.merges_by_size is None:
+        raise ValueError(f"{run_folder}: no merges_by_size.csv (a kernel run has coalescence on)")
+    case = run.case
+    small, large = _bin_of(diameter_small, SIZE_BINS), _bin_of(diameter_large, SIZE_BINS)
+    table = run.merges_by_size
+    pair = table[np.isclose(table["small_low"], small[0]) & np.isclose(table["large_low"], large[0])]
+    merges = int(pair["merges"].sum())
+    snapshots = [read_droplets(run_folder, float(t)) for t in run.snapshot_times()]
+    exposure = pair_exposure(snapshots, small, large, case.geometry.width * case.geometry.depth,
+                             slice_height or case.fulldem.cell_size)
+    result = collision_efficiency(merges, exposure, diameter_small, diameter_large)
+    result.update(bins={"small": small, "large": large}, snapshots=len(snapshots))
+    return result
+
+
+#: Steady quantities of the paper table and the seed scatter: time-series columns.
+STEADY_COLUMNS = ("droplet_count", "mean_diameter", "sauter_diameter", "channel_radius", "channel_velocity",
+                  "centreline_settling_velocity", "mean_settling_velocity", "coalesced_count")
+
+
+def run_summary(run) -> dict:
+    """The steady window of a run's droplet count (:func:`steady_window`) and the means of :data:`STEADY_COLUMNS`
+    over it (over the last third where no window is steady: ``steady`` False)."""
+    series = run.timeseries
+    window = steady_window(series)
+    steady = math.isfinite(window["start"])
+    start = window["start"] if steady else float(series["time"].iloc[-1]) * 2.0 / 3.0
+    means = steady_means(series, [c for c in STEADY_COLUMNS if c in series], start)
+    last = series.iloc[-1]
+    fed = float(last["mass_fed"])
+    return {"steady": steady, "start": start, "cycles": window["cycles"], "spread": window["spread"], **means,
+            "settled_fraction": float(last["mass_settled"]) / fed if fed > 0 else math.nan,
+            "end_time": float(last["time"])}
+
+
+def density_line(droplets: pd.DataFrame) -> tuple[float, float]:
+    """Least-squares line density = a + b z of a snapshot's droplets: (a [kg/m^3], b [kg/m^4]) (seed paper Fig. 20)."""
+    b, a = np.polyfit(droplets["z"].to_numpy(), droplets["density"].to_numpy(), 1)
+    return float(a), float(b)
+
+
+def report(root="data/reference") -> str:
+    """The reference set's evidence as text: each stored run's steady summary, the seed scatter of simple and
+    cubic, deep's rim and density line, the resolution checks. ``python -m analysis.evidence [ROOT]``."""
+    from pathlib import Path
+
+    from .runs import load_run
+
+    root = Path(root)
+    runs = {p.name: load_run(p) for p in sorted(root.iterdir()) if (p / "reference.json").is_file()}
+    summaries = {name: run_summary(run) for name, run in runs.items()}
+    lines = ["run | steady from [s] (cycles, spread) | count | mean d [mm] | d32 [mm] | channel radius [mm] | "
+             "axis velocity [mm/s] | settled fraction | end [s]"]
+    for name, s in summaries.items():
+        steady = f"{s['start']:.0f} ({s['cycles']}, {100 * s['spread']:.1f} %)" if s["steady"] else \
+            f"not steady (last third from {s['start']:.0f})"
+        lines.append(f"{name} | {steady} | {s['droplet_count']:.0f} | {1e3 * s['mean_diameter']:.3f} | "
+                     f"{1e3 * s['sauter_diameter']:.3f} | {1e3 * s['channel_radius']:.1f} | "
+                     f"{1e3 * s['channel_velocity']:.1f} | {s['settled_fraction']:.3f} | {s['end_time']:g}")
+    for first, second in (("simple", "simple_seed2"), ("cubic", "cubic_seed2")):
+        if first in summaries and second in summaries:
+            scatter = seed_scatter({k: summaries[first][k] for k in STEADY_COLUMNS if k in summaries[first]},
+                                   summaries[second])
+            lines.append(f"seed scatter {second} vs {first}: "
+                         + ", ".join(f"{k} {100 * v:+.1f} %" for k, v in scatter.items()))
+    if "deep" in runs:
+        run = runs["deep"]
+        t, frame = run.droplets()
+        axis = run.case.inlet_center
+        for low, high in ((0.15, 0.35),):
+            rim = rim_share(frame, axis, low, high)
+            lines.append(f"deep rim test at t = {t:g} s, z {low}-{high} m: {rim['rim']} of {rim['outside']} droplets "
+                         f"beyond 2 r_half = {2e3 * rim['half_volume_radius']:.1f} mm never merged and older than "
+                         f"2 x the median age {rim['median_age']:.1f} s: share {rim['share']:.3f}")
+        a, b = density_line(frame)
+        lines.append(f"deep density line at t = {t:g} s: {a:.0f} + {b:.0f} z kg/m^3 (z in m above the bottom)")
+    for coarse, fine in (("deep", "deep_fine"), ("demo", "demo_cell_33"), ("demo", "demo_cell_25")):
+        if coarse in runs and fine in runs:
+            end = min(summaries[fine]["end_time"], summaries[coarse]["end_time"])
+            start = end * 2.0 / 3.0
+            cols = ["droplet_count", "channel_radius", "channel_velocity"]
+            c = steady_means(runs[coarse].timeseries, cols, start, end)
+            f = steady_means(runs[fine].timeseries, cols, start, end)
+            lines.append(f"resolution {fine} vs {coarse} over {start:.0f}-{end:.0f} s: "
+                         + ", ".join(f"{k} {c[k]:.4g} -> {f[k]:.4g} ({100 * (f[k] / c[k] - 1):+.1f} %)"
+                                     for k in cols))
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    import sys
+
+    print(report(sys.argv[1] if len(sys.argv) > 1 else "data/reference"))

@@ -542,6 +542,34 @@ def available_references(root="data/reference") -> list[str]:
 
 
 # -------------------------------------------------------------------------------------------------- command line
+def store_set(sweep_out, dest_root="data/reference", snapshots=2, only=None, set_file=None) -> dict[str, Path | str]:
+    """Store every finished run of a run-set sweep (``settler sweep --set FILE --engine full --out SWEEP_OUT``) as
+    ``dest_root/<run name>/``, its command the one that regenerates it (``settler sweep --set FILE --engine full
+    --only NAME``, FILE as given to the sweep, or ``set_file``). Returns name -> the stored folder, or -> why it was
+    not stored (not finished)."""
+    from analysis.sweep.execution import DONE_FILE, POINTS
+
+    sweep_out = Path(sweep_out)
+    info = read_json(sweep_out / "sweep.json", StoreError)
+    if not isinstance(info, dict) or "runs" not in info:
+        raise StoreError(f"{sweep_out}: no sweep.json of a run set (settler sweep --set FILE --out {sweep_out})")
+    if info.get("engine") != "full":
+        raise StoreError(f"{sweep_out}: a sweep of the {info.get('engine')} engine; references are full runs")
+    source = set_file or info.get("set")
+    wanted = None if only is None else set(only.split(",") if isinstance(only, str) else only)
+    results: dict[str, Path | str] = {}
+    for name, run in info["runs"].items():
+        if wanted is not None and name not in wanted:
+            continue
+        folder = sweep_out / POINTS / run["hash"]
+        if not (folder / DONE_FILE).is_file():
+            results[name] = f"not finished ({folder} has no {DONE_FILE})"
+            continue
+        command = f"settler sweep --set {source} --engine full --only {name}"
+        results[name] = store_reference(folder, name, dest_root=dest_root, snapshots=snapshots, command=command)
+    return results
+
+
 def main(argv=None) -> int:
     """``python -m analysis.reference RUN CASE_NAME [--dest DIR] [--snapshots N]``: store RUN as a reference.
     Exit status 0 done, 2 a refused run folder or argument."""
@@ -560,6 +588,9 @@ def main(argv=None) -> int:
     parser.add_argument("--commit", default=None,
                         help="git commit of the code that made the run (default: the one in its metadata.json, "
                              "else this checkout's)")
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["set"]:
+        return _main_set(argv[1:])
     args = parser.parse_args(argv)
     try:
         folder = store_reference(args.run, args.case_name, dest_root=args.dest, snapshots=args.snapshots,
@@ -575,6 +606,29 @@ def main(argv=None) -> int:
              else "no snapshots"))
     for note in info["notes"]:
         print(f"note: {note}")
+    return 0
+
+
+def _main_set(argv) -> int:
+    """``python -m analysis.reference set SWEEP_OUT [--only a,b] [--dest DIR] [--snapshots N] [--set-file FILE]``."""
+    parser = argparse.ArgumentParser(prog="python -m analysis.reference set",
+                                     description="Store the finished runs of a run-set sweep of the full engine as "
+                                                 "references, each under its run name.")
+    parser.add_argument("sweep_out", help="the --out folder of 'settler sweep --set FILE --engine full'")
+    parser.add_argument("--only", default=None, help="only these runs (comma-separated names)")
+    parser.add_argument("--dest", default="data/reference", help="where references lie (default: data/reference)")
+    parser.add_argument("--snapshots", type=int, default=2, help="droplet snapshots per run (default: 2)")
+    parser.add_argument("--set-file", default=None,
+                        help="the run-set file as the stored commands should name it (default: as the sweep was "
+                             "given it)")
+    args = parser.parse_args(argv)
+    try:
+        results = store_set(args.sweep_out, args.dest, args.snapshots, args.only, args.set_file)
+    except ValueError as exc:
+        print(f"{parser.prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    for name, result in results.items():
+        print(f"{name}: {result}")
     return 0
 
 

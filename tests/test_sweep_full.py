@@ -67,6 +67,17 @@ def test_a_run_set_of_full_runs_records_each_runs_own_metrics(tmp_path):
     assert again.ran == 0 and again.skipped == 2 and again.table["resumed"].all()
     info = json.loads((tmp_path / "out" / "sweep.json").read_text())
     assert info["engine"] == "full" and set(info["runs"]) == {"base", "double"}
+    # stored as references under their names, each with the command that regenerates it alone
+    from analysis import load_run
+    from analysis.reference import store_set
+
+    stored = store_set(tmp_path / "out", tmp_path / "reference", set_file="design.toml")
+    assert set(stored) == {"base", "double"}
+    for name, folder in stored.items():
+        run = load_run(folder)
+        assert run.reference["command"] == f"settler sweep --set design.toml --engine full --only {name}"
+        assert run.reference["dirty"] is not None and run.reference["engine_trees"] == meta["engine_trees"]
+        assert str(tmp_path) not in json.dumps(run.reference)
 
 
 def test_an_interrupted_full_point_resumes_from_its_checkpoint(tmp_path):
