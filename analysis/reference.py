@@ -542,31 +542,27 @@ def available_references(root="data/reference") -> list[str]:
 
 
 # -------------------------------------------------------------------------------------------------- command line
-def store_set(sweep_out, dest_root="data/reference", snapshots=2, only=None, set_file=None) -> dict[str, Path | str]:
-    """Store every finished run of a run-set sweep (``settler sweep --set FILE --engine full --out SWEEP_OUT``) as
-    ``dest_root/<run name>/``, its command the one that regenerates it (``settler sweep --set FILE --engine full
-    --only NAME``, FILE as given to the sweep, or ``set_file``). Returns name -> the stored folder, or -> why it was
-    not stored (not finished)."""
-    from analysis.sweep.execution import DONE_FILE, POINTS
+def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only=None) -> dict[str, Path | str]:
+    """Store every finished run of a run-set sweep of the full engine (``settler sweep --set SET_FILE --engine full
+    --out SWEEP_OUT``; finished runs only, so this may run while the sweep goes on) as ``dest_root/<run name>/``,
+    its command the one that regenerates it alone (``settler sweep --set SET_FILE --engine full --only NAME``).
+    Returns name -> the stored folder, or -> why it was not stored (not finished)."""
+    from analysis.sweep.execution import DONE_FILE, POINTS, point_hash
+    from analysis.sweep.runset import load_run_set
 
     sweep_out = Path(sweep_out)
-    info = read_json(sweep_out / "sweep.json", StoreError)
-    if not isinstance(info, dict) or "runs" not in info:
-        raise StoreError(f"{sweep_out}: no sweep.json of a run set (settler sweep --set FILE --out {sweep_out})")
-    if info.get("engine") != "full":
-        raise StoreError(f"{sweep_out}: a sweep of the {info.get('engine')} engine; references are full runs")
-    source = set_file or info.get("set")
     wanted = None if only is None else set(only.split(",") if isinstance(only, str) else only)
     results: dict[str, Path | str] = {}
-    for name, run in info["runs"].items():
-        if wanted is not None and name not in wanted:
+    for run in load_run_set(set_file).runs:
+        if wanted is not None and run.name not in wanted:
             continue
-        folder = sweep_out / POINTS / run["hash"]
+        folder = sweep_out / POINTS / point_hash(run.case, "full", run.droplets)
         if not (folder / DONE_FILE).is_file():
-            results[name] = f"not finished ({folder} has no {DONE_FILE})"
+            results[run.name] = f"not finished ({folder} has no {DONE_FILE})"
             continue
-        command = f"settler sweep --set {source} --engine full --only {name}"
-        results[name] = store_reference(folder, name, dest_root=dest_root, snapshots=snapshots, command=command)
+        command = f"settler sweep --set {set_file} --engine full --only {run.name}"
+        results[run.name] = store_reference(folder, run.name, dest_root=dest_root, snapshots=snapshots,
+                                            command=command)
     return results
 
 
@@ -610,7 +606,7 @@ def main(argv=None) -> int:
 
 
 def _main_set(argv) -> int:
-    """``python -m analysis.reference set SWEEP_OUT [--only a,b] [--dest DIR] [--snapshots N] [--set-file FILE]``."""
+    """``python -m analysis.reference set SWEEP_OUT SET_FILE [--only a,b] [--dest DIR] [--snapshots N]``."""
     parser = argparse.ArgumentParser(prog="python -m analysis.reference set",
                                      description="Store the finished runs of a run-set sweep of the full engine as "
                                                  "references, each under its run name.")
@@ -618,12 +614,11 @@ def _main_set(argv) -> int:
     parser.add_argument("--only", default=None, help="only these runs (comma-separated names)")
     parser.add_argument("--dest", default="data/reference", help="where references lie (default: data/reference)")
     parser.add_argument("--snapshots", type=int, default=2, help="droplet snapshots per run (default: 2)")
-    parser.add_argument("--set-file", default=None,
-                        help="the run-set file as the stored commands should name it (default: as the sweep was "
-                             "given it)")
+    parser.add_argument("set_file", help="the run-set file of the sweep, as the stored commands should name it "
+                                         "(e.g. data/reference/design.toml)")
     args = parser.parse_args(argv)
     try:
-        results = store_set(args.sweep_out, args.dest, args.snapshots, args.only, args.set_file)
+        results = store_set(args.sweep_out, args.set_file, args.dest, args.snapshots, args.only)
     except ValueError as exc:
         print(f"{parser.prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2

@@ -71,13 +71,13 @@ def test_a_run_set_of_full_runs_records_each_runs_own_metrics(tmp_path):
     from analysis import load_run
     from analysis.reference import store_set
 
-    stored = store_set(tmp_path / "out", tmp_path / "reference", set_file="design.toml")
+    stored = store_set(tmp_path / "out", path, tmp_path / "reference")
     assert set(stored) == {"base", "double"}
     for name, folder in stored.items():
         run = load_run(folder)
-        assert run.reference["command"] == f"settler sweep --set design.toml --engine full --only {name}"
+        assert run.reference["command"] == f"settler sweep --set {path} --engine full --only {name}"
         assert run.reference["dirty"] is not None and run.reference["engine_trees"] == meta["engine_trees"]
-        assert str(tmp_path) not in json.dumps(run.reference)
+        assert str(tmp_path / "out") not in json.dumps(run.reference)  # the sweep's folders are not named
 
 
 def test_an_interrupted_full_point_resumes_from_its_checkpoint(tmp_path):
