@@ -38,6 +38,6 @@ if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY
 
 # The Python API (see fulldem.api): setup a case, run it into a folder, load a run's results.
 from .api import Result, Setup, load, run, setup  # noqa: E402 (after the threading layer is chosen)
-from .driver import RunError, RunInterrupted  # noqa: E402
+from .driver import RunError, RunInterrupted, RunRefused  # noqa: E402
 
-__all__ = ["Result", "RunError", "RunInterrupted", "Setup", "THREADING_LAYER_PRIORITY", "load", "run", "setup"]
+__all__ = ["Result", "RunError", "RunInterrupted", "RunRefused", "Setup", "THREADING_LAYER_PRIORITY", "load", "run", "setup"]

@@ -32,8 +32,9 @@ def add_arguments(parser):
 
 
 def main(args) -> int:
-    """Run ``settler full``: 0 done, 3 a run that failed, 128 + N stopped by signal N after saving. A bad case
-    (CaseError) or output folder is reported by settler.cli (exit status 2)."""
+    """Run ``settler full``: 0 done, 2 refused input (RunRefused: an end time, a droplet list, an occupied output
+    folder, a checkpoint of another case; a bad case is reported by settler.cli), 3 a run that failed, 128 + N
+    stopped by signal N after saving."""
     import fulldem
     from settler.cases import load_case
     from settler.cli import warn_implausible
@@ -47,6 +48,9 @@ def main(args) -> int:
     except fulldem.RunInterrupted as exc:
         print(f"settler full: {exc}", file=sys.stderr)
         return 128 + exc.signal_number
+    except fulldem.RunRefused as exc:
+        print(f"settler full: error: {exc}", file=sys.stderr)
+        return 2
     except fulldem.RunError as exc:
         print(f"settler full: error: {exc}", file=sys.stderr)
         return 3

@@ -78,6 +78,11 @@ class RunError(RuntimeError):
     """A run that cannot start or continue; the message says why."""
 
 
+class RunRefused(RunError):
+    """Input the run refuses before it takes a step (an end time, a droplet list, an output folder, a checkpoint of
+    another case): the command line exits 2 for it, as for a refused case key."""
+
+
 class RunInterrupted(RunError):
     """The run was stopped by a signal after its state was saved; ``signal_number`` says which."""
 
@@ -318,7 +323,7 @@ def _read_checkpoint_for(case, checkpoint: Path, out: Path, log):
             f"{out / 'case.toml'}")
     differences = case_differences(saved, case)
     if differences:
-        raise RunError(f"--resume: the checkpoint in {out} belongs to another case; keys that differ: "
+        raise RunRefused(f"--resume: the checkpoint in {out} belongs to another case; keys that differ: "
                        + "; ".join(differences) + ". Resume with the run's own case (its case.toml), or start a new "
                        "run in another folder")
     return arrays, meta
@@ -368,26 +373,26 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     fd = case.fulldem
     t_end = fd.end_time if end_time is None else float(end_time)
     if not (math.isfinite(t_end) and t_end > 0.0):
-        raise RunError(f"end_time = {t_end!r} s: allowed: a finite number of seconds > 0")
+        raise RunRefused(f"end_time = {t_end!r} s: allowed: a finite number of seconds > 0")
     if resume and droplets:
-        raise RunError("--droplets with --resume: a resumed run takes its droplets from the checkpoint; drop "
+        raise RunRefused("--droplets with --resume: a resumed run takes its droplets from the checkpoint; drop "
                        "--droplets, or start a new run in another folder")
     check_case(case)
     if resume and str(out_dir).strip() and not (Path(out_dir) / "checkpoint.npz").is_file():
-        raise RunError(f"--resume: no checkpoint in {out_dir}; start without --resume")
+        raise RunRefused(f"--resume: no checkpoint in {out_dir}; start without --resume")
     try:
         out = prepare_output_folder(out_dir, overwrite=overwrite, resume=resume)
     except OutputError as exc:
-        raise RunError(str(exc)) from None
+        raise RunRefused(str(exc)) from None
     checkpoint = out / "checkpoint.npz"
     loaded = _read_checkpoint_for(case, checkpoint, out, log) if resume else None
     if loaded is not None:
         if loaded[1].get("feed_on") is not None and feed is not None and bool(feed) != loaded[1]["feed_on"]:
-            raise RunError(f"--resume: the run in {out} was started with the feed {'on' if loaded[1]['feed_on'] else 'off'}; "
+            raise RunRefused(f"--resume: the run in {out} was started with the feed {'on' if loaded[1]['feed_on'] else 'off'}; "
                            "resume it the same way (--no-feed only if it was started with --no-feed)")
         feed = loaded[1].get("feed_on", feed)
         if t_end <= loaded[1]["time"] + 1e-12:
-            raise RunError(f"--end-time {t_end:g} s: the checkpoint in {out} is already at t = {loaded[1]['time']:.6g} s; "
+            raise RunRefused(f"--end-time {t_end:g} s: the checkpoint in {out} is already at t = {loaded[1]['time']:.6g} s; "
                            "allowed: a later end time")
     store = None
     if droplets:
@@ -397,7 +402,7 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
                                       slag_density=case.slag.density, default_density=case.matte.density,
                                       overlap_limit=1.0)  # engulfed or coincident pairs never separate
         except DropletListError as exc:
-            raise RunError(str(exc)) from None
+            raise RunRefused(str(exc)) from None
     sim = Simulation(case, droplets=store, feed=feed)
     sim.initial_mass = sim.mass_in_slag()
     rows = []

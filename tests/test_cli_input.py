@@ -72,7 +72,7 @@ def test_reduced_out_into_another_run_is_refused(capsys, tmp_path):
 def test_droplet_list_errors_are_one_line(capsys, tmp_path):
     bad = tmp_path / "d.csv"
     bad.write_text("x,y,z,diameter,densty\n0.05,0.05,0.05,0.001,5000\n")
-    assert main(["full", "demo", "--droplets", str(bad), "--no-feed", "--out", str(tmp_path / "o"), "--quiet"]) == 3
+    assert main(["full", "demo", "--droplets", str(bad), "--no-feed", "--out", str(tmp_path / "o"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "densty" in err and "density" in err
 

@@ -202,7 +202,7 @@ def test_unusable_out_is_one_line(tmp_path, capsys, out, expected):
 
     (tmp_path / "file").write_text("x")
     out = out if out in ("", "/dev/null") else tmp_path / out
-    assert main(["full", "demo", *SMALL, "--out", str(out), "--end-time", "0.004", "--quiet"]) == 3
+    assert main(["full", "demo", *SMALL, "--out", str(out), "--end-time", "0.004", "--quiet"]) == 2  # refused input
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and expected in err, err
 
