@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from settler.output import OutputError
+from settler.output import SNAPSHOT_TABLES, OutputError, read_table
 
 
 class NoData(LookupError):
@@ -138,3 +138,11 @@ def read_json(path: Path, error=OutputError):
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise error(f"{path}: cannot be read as JSON ({exc})") from None
+
+
+def read_zone_tables(folder) -> dict[str, pd.DataFrame]:
+    """The zone diagnostics present in ``folder`` (zone_profile.csv, zones.csv, lift_by_size.csv of
+    :data:`settler.output.SNAPSHOT_TABLES`), keyed by the name without ``.csv``."""
+    folder = Path(folder)
+    return {name[:-4]: read_table(folder / name) for name in SNAPSHOT_TABLES
+            if name != "channel_profile.csv" and (folder / name).is_file()}

@@ -54,8 +54,7 @@ import pandas as pd
 
 from settler.output import read_channel_profile, read_time_series, to_json
 
-from .files import read_json
-from .runs import read_zone_tables
+from .files import read_json, read_zone_tables
 
 
 #: Largest size [bytes] of one stored reference folder; above it fewer snapshots are kept (three cases must stay

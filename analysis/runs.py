@@ -40,10 +40,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from settler.output import (SNAPSHOT_TABLES, TIME_SERIES, OutputError, atomic_write_bytes, read_channel_profile,
-                            read_table, read_time_series)
+from settler.output import TIME_SERIES, OutputError, atomic_write_bytes, read_channel_profile, read_time_series
 
-from .files import read_json
+from .files import read_json, read_zone_tables
 
 
 #: Engine names as ``metadata.json`` records them.
@@ -219,13 +218,6 @@ def load_run(folder) -> Run:
                merges_by_size=optional["merges_by_size.csv"], channel_profile=optional["channel_profile.csv"],
                zones=read_zone_tables(folder))
 
-
-def read_zone_tables(folder) -> dict[str, pd.DataFrame]:
-    """The zone diagnostics present in ``folder`` (zone_profile.csv, zones.csv, lift_by_size.csv of
-    :data:`settler.output.SNAPSHOT_TABLES`), keyed by the name without ``.csv``."""
-    folder = Path(folder)
-    return {name[:-4]: read_table(folder / name) for name in SNAPSHOT_TABLES
-            if name != "channel_profile.csv" and (folder / name).is_file()}
 
 
 def _engine(folder: Path, metadata) -> str | None:
