@@ -468,6 +468,11 @@ def write_netcdf(table: pd.DataFrame, plan: Design, path: Path, base: Case) -> P
         dataset[axis.key].attrs.update(units=axis.unit or "-", sweep_spec=axis.spec)
     dataset.attrs.update(case=base.case.name, design=plan.name, fixed_overrides=json.dumps(plan.fixed),
                          matte_loss="mass_lost / mass_fed at the last output (popbal time series)")
+    return write_dataset(dataset, path)
+
+
+def write_dataset(dataset, path: Path) -> Path:
+    """Write an xarray Dataset as netCDF (h5netcdf) to a temporary file beside ``path``, then rename it."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         dataset.to_netcdf(tmp, engine="h5netcdf")

@@ -27,7 +27,6 @@ commit and engine trees, counts).
 from __future__ import annotations
 
 import math
-import os
 import re
 import sys
 import time
@@ -40,7 +39,8 @@ import pandas as pd
 from settler.cases import Case, CaseError, case_with_overrides
 from settler.output import atomic_write_text, prepare_output_folder, source_commit, to_json
 
-from .execution import METRICS, POINTS, Executor, check_engine, check_workers, point_hash, read_done, warm_numba
+from .execution import (METRICS, POINTS, Executor, check_engine, check_workers, point_hash, read_done, warm_numba,
+                        write_dataset)
 
 #: Keys of a run's table in a run-set file; ``case`` is required.
 RUN_KEYS = ("case", "overrides", "family", "purpose", "droplets")
@@ -212,13 +212,7 @@ def _write_set_netcdf(table: pd.DataFrame, path: Path, engine: str, source) -> P
     for name, (unit, meaning) in METRICS.items():
         dataset[name].attrs.update(units=unit, long_name=meaning)
     dataset.attrs.update(run_set=str(source), engine=engine)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        dataset.to_netcdf(tmp, engine="h5netcdf")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    return write_dataset(dataset, path)
 
 
 __all__ = ["RUN_KEYS", "RunSet", "SetResult", "SetRun", "load_run_set", "sweep_set"]
