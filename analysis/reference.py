@@ -6,7 +6,8 @@ comparisons and the seed paper's figures need, in a folder of a few MB (SI units
 
 ==========================  ==========================================================================================
 ``timeseries.csv``          copied as it is (columns of :data:`settler.output.TIME_SERIES`, units line first)
-``case.toml``               copied as it is (the resolved case)
+``case.toml``               the resolved case, copied with its first line's "loaded from" naming the case file from
+                            ``data/`` (``data/cases/simple.toml``) instead of this machine's folder
 ``merges_by_size.csv``      copied as it is, if the run has it (coalescence runs)
 ``channel_profile.csv``     copied as it is, if the run has it
 ``zone_profile.csv``,       the zone diagnostics (:data:`settler.output.SNAPSHOT_TABLES`), copied as they are, if the
@@ -294,7 +295,9 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
         os.umask(mask)
         os.chmod(tmp, 0o777 & ~mask)
         for file in REQUIRED_FILES + OPTIONAL_FILES:
-            if (run / file).is_file():
+            if file == "case.toml":
+                _copy_case(run / file, tmp / file)
+            elif (run / file).is_file():
                 shutil.copyfile(run / file, tmp / file)
 
         droplets: dict[int, dict] = {}
@@ -397,14 +400,33 @@ def _portable(metadata, command):
     out = dict(metadata)
     if command is not None and "command" in out:
         out["command"] = command
-    source = out.get("case_source")
-    if isinstance(source, str) and Path(source).is_absolute():
-        parts = Path(source).parts
-        if "data" in parts:
-            out["case_source"] = "/".join(parts[len(parts) - 1 - parts[::-1].index("data"):])
-        else:
-            out["case_source"] = Path(source).name
+    if isinstance(out.get("case_source"), str):
+        out["case_source"] = _portable_path(out["case_source"])
     return out
+
+
+def _portable_path(source: str) -> str:
+    """An absolute path named from its last ``data/`` folder (``data/cases/simple.toml``), else by its file name;
+    a relative path as it is."""
+    if not Path(source).is_absolute():
+        return source
+    parts = Path(source).parts
+    if "data" in parts:
+        return "/".join(parts[len(parts) - 1 - parts[::-1].index("data"):])
+    return Path(source).name
+
+
+#: The first line of a resolved case.toml (settler.cases.Case.to_toml) that names where the case was loaded from.
+LOADED_FROM = "# resolved case; loaded from "
+
+
+def _copy_case(source: Path, dest: Path) -> None:
+    """Copy a run's case.toml with its 'loaded from' comment naming the case file portably (:func:`_portable_path`):
+    the case itself is unchanged."""
+    lines = source.read_text(encoding="utf-8").splitlines(keepends=True)
+    if lines and lines[0].startswith(LOADED_FROM):
+        lines[0] = LOADED_FROM + _portable_path(lines[0][len(LOADED_FROM):].strip()) + "\n"
+    dest.write_text("".join(lines), encoding="utf-8")
 
 
 def _replace(tmp: Path, dest: Path) -> None:

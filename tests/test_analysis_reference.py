@@ -115,8 +115,13 @@ def test_stored_folder_is_small_and_complete(stored):
     assert names == {"timeseries.csv", "case.toml", "merges_by_size.csv", "channel_profile.csv", "snapshots.npz",
                      "reference.json"}
     assert not any(p.name.startswith(".") for p in (base / "refs").iterdir())  # no temporary folders left
-    for name in ("timeseries.csv", "case.toml", "merges_by_size.csv", "channel_profile.csv"):
+    for name in ("timeseries.csv", "merges_by_size.csv", "channel_profile.csv"):
         assert (dest / name).read_bytes() == (base / "run" / name).read_bytes()
+    # case.toml: the same lines but the first, whose 'loaded from' names the case file from data/, not this machine
+    stored_lines = (dest / "case.toml").read_text().splitlines()
+    run_lines = (base / "run" / "case.toml").read_text().splitlines()
+    assert stored_lines[1:] == run_lines[1:]
+    assert stored_lines[0] == "# resolved case; loaded from data/cases/demo.toml", stored_lines[0]
     assert reference.available_references(base / "refs") == ["demo"]
 
 

@@ -16,6 +16,10 @@ from settler.output import read_time_series
 SHORT = {"fulldem.end_time": 0.02, "fulldem.output_interval": 0.004, "fulldem.snapshot_interval": 0.0}
 
 
+def row_hash(result, name):
+    return result.table.set_index("name").loc[name, "hash"]
+
+
 def _write_set(tmp_path, body: str):
     path = tmp_path / "set.toml"
     path.write_text(body)
@@ -78,6 +82,10 @@ def test_a_run_set_of_full_runs_records_each_runs_own_metrics(tmp_path):
         assert run.reference["command"] == f"settler sweep --set {path} --engine full --only {name}"
         assert run.reference["dirty"] is not None and run.reference["engine_trees"] == meta["engine_trees"]
         assert str(tmp_path / "out") not in json.dumps(run.reference)  # the sweep's folders are not named
+        first = (folder / "case.toml").read_text().splitlines()[0]
+        assert first == "# resolved case; loaded from data/cases/demo.toml", first
+        made = tmp_path / "out" / "points" / row_hash(result, name) / "case.toml"
+        assert run.case.to_dict() == load_case(made).to_dict()  # only the comment changed
 
 
 def test_an_interrupted_full_point_resumes_from_its_checkpoint(tmp_path):
