@@ -146,3 +146,14 @@ def read_zone_tables(folder) -> dict[str, pd.DataFrame]:
     folder = Path(folder)
     return {name[:-4]: read_table(folder / name) for name in SNAPSHOT_TABLES
             if name != "channel_profile.csv" and (folder / name).is_file()}
+
+
+def portable_path(source: str) -> str:
+    """An absolute path named from its last ``data/`` folder (``data/cases/simple.toml``), else by its file name;
+    a relative path as it is."""
+    if not Path(source).is_absolute():
+        return source
+    parts = Path(source).parts
+    if "data" in parts:
+        return "/".join(parts[len(parts) - 1 - parts[::-1].index("data"):])
+    return Path(source).name

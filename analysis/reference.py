@@ -55,7 +55,7 @@ import pandas as pd
 
 from settler.output import read_channel_profile, read_time_series, to_json
 
-from .files import read_json, read_zone_tables
+from .files import portable_path, read_json, read_zone_tables
 
 
 #: Largest size [bytes] of one stored reference folder; above it fewer snapshots are kept (three cases must stay
@@ -401,19 +401,8 @@ def _portable(metadata, command):
     if command is not None and "command" in out:
         out["command"] = command
     if isinstance(out.get("case_source"), str):
-        out["case_source"] = _portable_path(out["case_source"])
+        out["case_source"] = portable_path(out["case_source"])
     return out
-
-
-def _portable_path(source: str) -> str:
-    """An absolute path named from its last ``data/`` folder (``data/cases/simple.toml``), else by its file name;
-    a relative path as it is."""
-    if not Path(source).is_absolute():
-        return source
-    parts = Path(source).parts
-    if "data" in parts:
-        return "/".join(parts[len(parts) - 1 - parts[::-1].index("data"):])
-    return Path(source).name
 
 
 #: The first line of a resolved case.toml (settler.cases.Case.to_toml) that names where the case was loaded from.
@@ -425,7 +414,7 @@ def _copy_case(source: Path, dest: Path) -> None:
     the case itself is unchanged."""
     lines = source.read_text(encoding="utf-8").splitlines(keepends=True)
     if lines and lines[0].startswith(LOADED_FROM):
-        lines[0] = LOADED_FROM + _portable_path(lines[0][len(LOADED_FROM):].strip()) + "\n"
+        lines[0] = LOADED_FROM + portable_path(lines[0][len(LOADED_FROM):].strip()) + "\n"
     dest.write_text("".join(lines), encoding="utf-8")
 
 
