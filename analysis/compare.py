@@ -12,7 +12,7 @@ extrapolation), settled_fraction from its interpolated masses.
 the reduced values over the table's rows in the window where both are finite (plain means of the rows: the full
 run writes at a fixed output interval, so this is the time mean), and
 
-    relative_error = |mean_reduced - mean_full| / |mean_full|
+    relative_error = abs(mean_reduced - mean_full) / abs(mean_full)
 
 (NaN where no row is in the window or mean_full = 0). :func:`relative_error` and :func:`window_errors` are this
 definition, pure and small, for reuse (calibration).
@@ -73,7 +73,7 @@ class Window:
 
 # --------------------------------------------------------------------------------------------- the definition
 def relative_error(mean_full: float, mean_reduced: float) -> float:
-    """|mean_reduced - mean_full| / |mean_full| [-]; NaN if either is not finite or mean_full is 0."""
+    """abs(mean_reduced - mean_full) / abs(mean_full) [-]; NaN if either is not finite or mean_full is 0."""
     if not (math.isfinite(mean_full) and math.isfinite(mean_reduced)) or mean_full == 0.0:
         return math.nan
     return abs(mean_reduced - mean_full) / abs(mean_full)

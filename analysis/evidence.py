@@ -12,7 +12,7 @@ droplets, and the collision efficiency of the kernel run (SI units throughout).
   a height band, the share of the droplets farther than twice the half-volume radius from the inlet axis that have
   never merged and are older than twice the median age of the band's droplets.
 * :func:`collision_efficiency` -- from a closed box of two droplet sizes settling without feed: the merges of the
-  unequal pair (from ``merges_by_size.csv``) over the gravitational collisions that pi (a_i + a_j)^2 |U_i - U_j| n_i
+  unequal pair (from ``merges_by_size.csv``) over the gravitational collisions that pi (a_i + a_j)^2 abs(U_i - U_j) n_i
   n_j V predicts, integrated over the snapshots in horizontal slices (so that the clouds' separation as they settle
   counts), with the measured mean settling velocity of each size; its standard error from the Poisson count of
   merges and the scatter of the velocity difference over the snapshots.
@@ -39,7 +39,7 @@ def steady_window(timeseries: pd.DataFrame, column: str = "droplet_count", cycle
                   tolerance: float = STEADY_TOLERANCE, cycles: int = STEADY_CYCLES) -> dict:
     """The earliest steady start of ``column`` (module docstring), in whole cycles back from the run's last output:
     {"start": t0 [s] or NaN if no window of ``cycles`` blocks is steady, "cycles": blocks in the window, "mean": the
-    mean of the block means, "block_means", "spread": max |block mean / mean - 1|}."""
+    mean of the block means, "block_means", "spread": max abs(block mean / mean - 1)}."""
     t = timeseries["time"].to_numpy(dtype=float)
     y = timeseries[column].to_numpy(dtype=float)
     end = t[-1]
@@ -117,7 +117,7 @@ def pair_exposure(snapshots, small: tuple[float, float], large: tuple[float, flo
 
 
 def collision_efficiency(merges: int, exposure: dict, diameter_small: float, diameter_large: float) -> dict:
-    """E = merges / (pi (a_s + a_l)^2 integral |U_l - U_s| C dt) with C = sum N_s N_l / V over slices
+    """E = merges / (pi (a_s + a_l)^2 integral abs(U_l - U_s) C dt) with C = sum N_s N_l / V over slices
     (:func:`pair_exposure`), trapezoidal over the snapshots; standard error from the Poisson count (sqrt M / M)
     and the standard error of the mean velocity difference over the snapshots, in quadrature. Returns {"efficiency",
     "standard_error", "expected_collisions", "merges", "velocity_difference" [m/s]}."""

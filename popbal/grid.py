@@ -26,16 +26,16 @@ from settler.physics import sphere_volume
 class SectionGrid(NamedTuple):
     """Pivot grid in original droplet volume. K sections.
 
-    pivots (K,) [m^3]: pivot volumes x_i, geometric, ratio ``ratio``.
-    edges (K+1,) [m^3]: cell edges b_i, pivot x_i is the midpoint of [b_i, b_{i+1}).
-    diameters (K,) [m]: original diameters of the pivots, (6 x_i / pi)^(1/3).
-    target (K, K) int64: cell receiving the merger of sections j and k (x_j + x_k in [b_i, b_{i+1})), or -1 where
-        x_j + x_k exceeds the volume limit (no coalescence beyond it).
-    loss_weight (K, K): fraction of a droplet of section i that a merger with a k-droplet actually moves out of
-        pivot i -- 1 unless the merger lands back in i's own cell, where the cell-average assignment returns all
-        but x_k / (x_{i+1} - x_i) of it. Only used to bound the stiffness of the coalescence rates (sub-steps):
-        a large droplet sweeping many small ones has a huge gross death rate but a small net one.
-    ratio: pivot ratio r [-]. volume_limit [m^3]: largest volume a merger may create (= top pivot).
+    - pivots (K,) [m^3]: pivot volumes x_i, geometric, ratio ``ratio``.
+    - edges (K+1,) [m^3]: cell edges b_i, pivot x_i is the midpoint of [b_i, b_{i+1}).
+    - diameters (K,) [m]: original diameters of the pivots, (6 x_i / pi)^(1/3).
+    - target (K, K) int64: cell receiving the merger of sections j and k (x_j + x_k in [b_i, b_{i+1})), or -1 where
+      x_j + x_k exceeds the volume limit (no coalescence beyond it).
+    - loss_weight (K, K): fraction of a droplet of section i that a merger with a k-droplet actually moves out of
+      pivot i -- 1 unless the merger lands back in i's own cell, where the cell-average assignment returns all
+      but x_k / (x_{i+1} - x_i) of it. Only used to bound the stiffness of the coalescence rates (sub-steps):
+      a large droplet sweeping many small ones has a huge gross death rate but a small net one.
+    - ratio: pivot ratio r [-]. volume_limit [m^3]: largest volume a merger may create (= top pivot).
     """
 
     pivots: np.ndarray

@@ -65,7 +65,7 @@ def relaxation_time(diameter, density_droplet, viscosity):
 
 @njit(cache=True)
 def reynolds_number(diameter, speed, density_fluid, viscosity):
-    """Particle Reynolds number Re_p = rho_f |u| d / mu [-]."""
+    """Particle Reynolds number Re_p = rho_f abs(u) d / mu [-]."""
     return density_fluid * abs(speed) * diameter / viscosity
 
 
@@ -198,8 +198,8 @@ def hindrance_factor(void_fraction, reynolds, hindrance):
     """Factor on the drag coefficient beta of model A for the hindrance of code ``hindrance`` (:data:`HINDRANCE`) [-].
 
     HINDRANCE_DI_FELICE: eps^(1 - chi(Re)) -- Di Felice's eps^-chi on a drag written with the superficial slip
-    eps |u - v| (Zhou et al. 2010, J. Fluid Mech. 661, 482, model A; see :mod:`fulldem.coupling.drag`); HINDRANCE_NONE: 1.
-    Both give 1 at void_fraction = 1. reynolds: Re = rho eps |u - v| d / mu.
+    eps abs(u - v) (Zhou et al. 2010, J. Fluid Mech. 661, 482, model A; see :mod:`fulldem.coupling.drag`); HINDRANCE_NONE: 1.
+    Both give 1 at void_fraction = 1. reynolds: Re = rho eps abs(u - v) d / mu.
     """
     if hindrance == HINDRANCE_DI_FELICE:
         return void_fraction ** (1.0 - di_felice_exponent(reynolds))
