@@ -40,7 +40,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from settler.output import TIME_SERIES, OutputError, atomic_write_bytes, read_channel_profile, read_time_series
+from settler.output import (TIME_SERIES, OutputError, atomic_write_bytes, read_channel_profile, read_time_series,
+                            round_times)
 
 from .files import read_json, read_zone_tables
 
@@ -72,6 +73,13 @@ class Run:
     channel_profile: pd.DataFrame | None
     zones: dict = dataclasses.field(default_factory=dict)
     _cache: dict = dataclasses.field(default_factory=dict, repr=False)
+
+    def __repr__(self) -> str:
+        times = self.timeseries["time"]
+        span = f"t = {times.iloc[0]:g}–{times.iloc[-1]:g} s" if len(times) else "no rows"
+        kind = "stored reference" if self.is_reference else f"{self.engine or 'unknown engine'} run"
+        return (f"<Run {self.folder.name!r}: {kind}, {len(times)} time-series rows ({span}), "
+                f"{len(self.timeseries.columns)} columns, folder {str(self.folder)!r}>")
 
     @property
     def is_reference(self) -> bool:
@@ -211,12 +219,13 @@ def load_run(folder) -> Run:
     metadata = read_json(folder / "metadata.json")
     if metadata is None and isinstance(reference, dict) and isinstance(reference.get("metadata"), dict):
         metadata = reference["metadata"]
-    optional = {name: read_channel_profile(folder / name) if (folder / name).is_file() else None
+    optional = {name: round_times(read_channel_profile(folder / name)) if (folder / name).is_file() else None
                 for name in ("merges_by_size.csv", "channel_profile.csv")}  # both plain CSV (+ a units line)
-    return Run(folder=folder, engine=_engine(folder, metadata), timeseries=series,
+    # times rounded to the nanosecond (runs written before the writers rounded them): selectable by output time
+    return Run(folder=folder, engine=_engine(folder, metadata), timeseries=round_times(series),
                units=time_series_units(series_path, metadata), metadata=metadata, reference=reference,
                merges_by_size=optional["merges_by_size.csv"], channel_profile=optional["channel_profile.csv"],
-               zones=read_zone_tables(folder))
+               zones={name: round_times(table) for name, table in read_zone_tables(folder).items()})
 
 
 

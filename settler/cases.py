@@ -28,14 +28,11 @@ from typing import Any
 
 # DATA_DIR: folder of the property sets and case presets: the SETTLER_DATA environment variable, else the checkout's
 # data/, else the copy installed with the package (see settler.paths).
-from .paths import DATA_DIR, DATA_DIR_SOURCE
+from .errors import CaseError
+from .paths import DATA_DIR, DATA_DIR_SOURCE, preset_names
 # The choices of the interchangeable models come from their registries, so a new model is added in one place.
 from .physics import (COALESCENCE_RULES, DRAG_LAWS, HINDRANCE, PROBABILITY_FORMS, cu2s_fraction_from_density,
                       matte_density, slag_viscosity)
-
-
-class CaseError(ValueError):
-    """A case file, property set or override that cannot be accepted; the message says why."""
 
 
 @dataclass(frozen=True)
@@ -348,7 +345,7 @@ def _toml_value(value) -> str:
 def list_presets() -> list[str]:
     """Names of the case presets shipped in data/cases/; CaseError if there are none (a broken installation)."""
     folder = DATA_DIR / "cases"
-    names = sorted(p.stem for p in folder.glob("*.toml"))
+    names = preset_names(DATA_DIR)
     if not names:
         raise CaseError(f"no case presets (*.toml) in {folder} (data folder from {DATA_DIR_SOURCE}); allowed: a "
                         "data folder holding cases/ and properties/: set SETTLER_DATA to one, or reinstall settler")

@@ -16,15 +16,15 @@ import shlex
 import sys
 
 from . import __version__
-from .cases import SCHEMA, CaseError, list_presets, load_case
-from .output import OutputError, to_json
+from .errors import CaseError, OutputError
+from .paths import DATA_DIR, preset_names
+
+# settler.cases (Numba, through the physics) and settler.output (pandas) are imported by the commands that use them,
+# so that `settler --help` and `settler COMMAND --help` start in well under a second (benchmarks/bench_startup.py).
 
 def _case_help() -> str:
-    try:
-        names = ", ".join(list_presets())
-    except CaseError:  # a broken installation: the commands still start and say so when a case is loaded
-        names = "none found"
-    return f"a preset name ({names}) or a path to a case TOML file"
+    names = ", ".join(preset_names()) or f"none found in {DATA_DIR / 'cases'}"  # a broken installation: the
+    return f"a preset name ({names}) or a path to a case TOML file"  # commands still start, a case load says so
 
 OVERRIDE_HELP = "section.key=value overrides of the case, e.g. slag.viscosity_reference=0.3 coalescence.enabled=false"
 
@@ -47,7 +47,9 @@ def _info_arguments(parser):
 
 
 def _info(args) -> int:
+    from .cases import load_case
     from .derived import as_records, derived_numbers, format_numbers
+    from .output import to_json
 
     case = load_case(args.case, args.overrides)
     warn_implausible(case, "info")
@@ -69,6 +71,8 @@ def _cases_arguments(parser):
 
 def schema_markdown() -> str:
     """The case-file reference, generated from settler.cases.SCHEMA."""
+    from .cases import SCHEMA
+
     lines = []
     for section, fields in SCHEMA.items():
         lines += [f"### [{section}]", "", "| key | unit | allowed | meaning |", "|---|---|---|---|"]
@@ -80,6 +84,8 @@ def schema_markdown() -> str:
 
 
 def _cases(args) -> int:
+    from .cases import list_presets, load_case
+
     if args.schema:
         print(schema_markdown())
         return 0

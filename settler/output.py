@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .errors import OutputError
+
 #: Time-series columns: name -> (unit, meaning). The one definition both engines use.
 TIME_SERIES: dict[str, tuple[str, str]] = {
     "time": ("s", "simulated time"),
@@ -142,10 +144,22 @@ SNAPSHOT_TABLES: dict[str, dict[str, tuple[str, str]]] = {
     "lift_by_size.csv": LIFT_BY_SIZE}
 
 
+#: Decimals [s] that written times are rounded to: a time accumulated from steps (34.799999999996565) is written as
+#: the output time it stands for (34.8), so that a reader can select it by that value (``ds.sel(time=34.8)``).
+TIME_DECIMALS = 9
+
+
+def round_times(frame: pd.DataFrame) -> pd.DataFrame:
+    """``frame`` with its ``time`` column (if any) rounded to :data:`TIME_DECIMALS` decimals of a second."""
+    if "time" in frame:
+        frame = frame.assign(time=frame["time"].round(TIME_DECIMALS))
+    return frame
+
+
 def write_table(rows: list[dict], columns: dict[str, tuple[str, str]], path) -> None:
     """Write ``rows`` (dicts with the keys of ``columns``, name -> (unit, meaning)) atomically as CSV, a units line
-    first."""
-    frame = pd.DataFrame(rows, columns=list(columns)).astype(float)
+    first; times rounded by :func:`round_times`."""
+    frame = round_times(pd.DataFrame(rows, columns=list(columns)).astype(float))
     units = "# units: " + ", ".join(f"{k} [{u}]" for k, (u, _) in columns.items()) + "\n"
     atomic_write_text(path, units + frame.to_csv(index=False))
 
@@ -171,10 +185,6 @@ RUN_FILES = ("case.toml", "metadata.json", "timeseries.csv", "timeseries.png", "
              "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz", "merges_by_size.csv",
              "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv")
 SNAPSHOT_PATTERNS = ("droplets_*.vtu", "fluid_*.vtu")
-
-
-class OutputError(ValueError):
-    """An output folder that cannot be used; the message says why and what to do."""
 
 
 def time_series_frame(rows: list[dict] | dict[str, np.ndarray]) -> pd.DataFrame:
@@ -233,7 +243,9 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 
 
 def write_time_series(frame: pd.DataFrame, path: str | os.PathLike) -> None:
-    """Write a time series as CSV atomically, with a header comment line giving every column's unit."""
+    """Write a time series as CSV atomically, with a header comment line giving every column's unit (read it with
+    ``pandas.read_csv(path, comment="#")``); times rounded by :func:`round_times`."""
+    frame = round_times(frame)
     units = ", ".join(f"{c} [{TIME_SERIES[c][0]}]" for c in frame.columns)
     atomic_write_text(path, f"# units: {units}\n" + frame.to_csv(index=False))
 

@@ -33,3 +33,8 @@ def find_data_dir(environ: Mapping[str, str] | None = None, package_dir: Path = 
 
 #: Folder of the property sets (properties/), case presets (cases/) and thermodynamic data (thermo/).
 DATA_DIR, DATA_DIR_SOURCE = find_data_dir()
+
+
+def preset_names(data_dir: Path | None = None) -> list[str]:
+    """Names of the case presets in ``data_dir/cases`` (default :data:`DATA_DIR`; sorted; empty if none)."""
+    return sorted(p.stem for p in (Path(data_dir or DATA_DIR) / "cases").glob("*.toml"))
