@@ -39,8 +39,11 @@ from pathlib import Path
 
 from settler.output import OutputError, atomic_write_text, prepare_output_folder
 
-#: The checkout's report folder (reports/ beside the analysis package); an installed package has none.
-REPORTS_DIR = Path(__file__).resolve().parents[1] / "reports"
+#: The report folder: the checkout's reports/ beside the analysis package, else the copy a wheel installs as
+#: settler/reports/ (pyproject.toml maps the one onto the other).
+REPORTS_DIR = next((folder for folder in (Path(__file__).resolve().parents[1] / "reports",
+                                          Path(__file__).resolve().parents[1] / "settler" / "reports")
+                    if folder.is_dir()), Path(__file__).resolve().parents[1] / "reports")
 #: The cell tag that marks a report's parameters cell (papermill's convention).
 PARAMETERS_TAG = "parameters"
 #: The tag papermill gives the cell it inserts with the given parameters.
@@ -494,6 +497,9 @@ def _print_list(reports_dir) -> int:
 
 def main(args) -> int:
     """``settler report``: exit status 0 written, 2 refused input, 3 the report failed (one-line reason)."""
+    from .extras import require
+
+    require("jupytext", "papermill", "nbconvert", "nbformat", "ipykernel")
     if args.list or args.name is None:
         return _print_list(args.reports)
     if args.out is None:

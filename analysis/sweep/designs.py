@@ -78,6 +78,9 @@ def build_design(axes: list[Axis], design: str = "grid", samples: int | None = N
 
 def _sample(design: str, problem: dict, n: int, seed: int) -> np.ndarray:
     """SALib's sample matrix (points x keys) of a sampled design."""
+    from ..extras import require
+
+    require("SALib")
     from SALib.sample import latin, morris, sobol
 
     if design == "lhs":

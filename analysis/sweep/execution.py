@@ -237,6 +237,9 @@ class Executor:
     def __enter__(self):
         if self.client is not None or (self.workers == 0 and self.scheduler is None):
             return self
+        from ..extras import require
+
+        require("distributed")
         from distributed import Client, LocalCluster
 
         if self.scheduler is not None:

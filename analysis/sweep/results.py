@@ -38,6 +38,9 @@ def sensitivity(table: pd.DataFrame, plan: Design, seed: int = 0) -> tuple[pd.Da
     half-widths) or Morris mu*, mu, sigma (mu* in the output's unit per full range of the key; on log10 for log
     axes); ``rank`` 1 for the largest ST or mu* per output. (None, reason) when a point failed (the estimators need
     every point); an output that is not finite at every point (log10 of a zero loss) gets NaN indices."""
+    from ..extras import require
+
+    require("SALib")
     from SALib.analyze import morris, sobol
 
     failed = int((table["status"] != "done").sum())
