@@ -186,8 +186,10 @@ class Run:
 
     def _dataset_attrs(self, source: str) -> dict:
         meta = self.metadata or {}
+        case = self.folder / "case.toml"
         return {"engine": self.engine or "unknown", "run_folder": str(self.folder.resolve()), "source_file": source,
-                "commit": str(meta.get("commit") or (self.reference or {}).get("commit") or "unknown")}
+                "commit": str(meta.get("commit") or (self.reference or {}).get("commit") or "unknown"),
+                **({"settler_case": case.read_text(encoding="utf-8")} if case.is_file() else {})}
 
 
 # ------------------------------------------------------------------------------------------------------ loading
@@ -335,8 +337,14 @@ def distribution_dataset(arrays: dict, descriptions: dict[str, tuple[str, str]],
 
 # ------------------------------------------------------------------------------------------------------- netCDF
 def write_netcdf(dataset, path, complevel: int = NETCDF_COMPLEVEL) -> Path:
-    """Write ``dataset`` to ``path`` as netCDF-4 through h5netcdf, every numeric variable zlib-compressed at
-    ``complevel``, atomically (built in memory, then :func:`settler.output.atomic_write_bytes`). Returns the path."""
+    """Write ``dataset`` to ``path`` as netCDF-4 through h5netcdf with CF-1.10 attributes (:func:`analysis.cf.apply`:
+    UDUNITS units, axis attributes, the case embedded when the dataset's ``settler_case`` holds it), every numeric
+    variable zlib-compressed at ``complevel``, atomically (built in memory, then
+    :func:`settler.output.atomic_write_bytes`). Returns the path."""
+    from . import cf
+
+    title = f"settler {dataset.attrs.get('engine', '')} {dataset.attrs.get('source_file', 'run')}".replace("  ", " ")
+    dataset = cf.apply(dataset.copy(deep=False), title=title, case_toml=dataset.attrs.get("settler_case"))
     encoding = {name: {"zlib": True, "complevel": int(complevel)}
                 for name, variable in dataset.variables.items() if variable.dtype.kind in "fiub"}
     data = dataset.to_netcdf(path=None, engine="h5netcdf", encoding=encoding)

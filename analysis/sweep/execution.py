@@ -470,12 +470,18 @@ def write_netcdf(table: pd.DataFrame, plan: Design, path: Path, base: Case) -> P
     for axis in plan.swept:
         dataset[axis.key].attrs.update(units=axis.unit or "-", sweep_spec=axis.spec)
     dataset.attrs.update(case=base.case.name, design=plan.name, fixed_overrides=json.dumps(plan.fixed),
-                         matte_loss="mass_lost / mass_fed at the last output (popbal time series)")
+                         matte_loss="mass_lost / mass_fed at the last output (popbal time series)",
+                         settler_case=base.to_toml())
     return write_dataset(dataset, path)
 
 
 def write_dataset(dataset, path: Path) -> Path:
-    """Write an xarray Dataset as netCDF (h5netcdf) to a temporary file beside ``path``, then rename it."""
+    """Write an xarray Dataset as netCDF (h5netcdf) with CF-1.10 attributes (:func:`analysis.cf.apply`) to a
+    temporary file beside ``path``, then rename it."""
+    from ..cf import apply
+
+    dataset = apply(dataset.copy(deep=False), title=f"settler sweep {dataset.attrs.get('case', '')}".strip(),
+                    case_toml=dataset.attrs.get("settler_case"))
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         dataset.to_netcdf(tmp, engine="h5netcdf")
