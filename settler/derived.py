@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -230,9 +231,20 @@ def format_numbers(groups: dict[str, list[Quantity]]) -> str:
     return "\n".join(lines)
 
 
+def identifier(name: str) -> str:
+    """A Python identifier for a derived number's ``name``: lower case, the parenthesised values left out, words
+    joined by underscores ("Stokes velocity, smallest fed (0.35 mm)" -> "stokes_velocity_smallest_fed")."""
+    text = re.sub(r"\([^)]*\)", " ", name).lower().replace("τ", "tau").replace("φ", "phi")
+    words = re.findall(r"[a-z0-9]+", text)
+    key = "_".join(words) or "value"
+    return key if key[0].isalpha() else "n_" + key
+
+
 def as_records(groups: dict[str, list[Quantity]]) -> list[dict]:
-    """Flat list of dicts (group, name, value, unit, note), e.g. for JSON or pandas."""
-    return [{"group": g, "name": q.name, "value": float(np.float64(q.value)), "unit": q.unit, "note": q.note}
+    """Flat list of dicts (key, group, name, value, unit, note), e.g. for JSON or pandas; ``key`` is
+    ``<group>_<identifier of the name>`` (:func:`identifier`), an identifier unique within the case."""
+    return [{"key": f"{identifier(g)}_{identifier(q.name)}", "group": g, "name": q.name,
+             "value": float(np.float64(q.value)), "unit": q.unit, "note": q.note}
             for g, items in groups.items() for q in items]
 
 

@@ -23,6 +23,17 @@ def _derived(case, capsys, *extra):
     return {r["name"]: r["value"] for r in records}
 
 
+@pytest.mark.parametrize("case", ["simple", "deep", "furnace"])
+def test_info_json_keys_are_unique_identifiers(case, capsys):
+    """settler info --json: each derived number has a key a program can use (an identifier, the same for every
+    case, unique), besides its name in words."""
+    assert main(["info", case, "--json"]) == 0
+    records = json.loads(capsys.readouterr().out)["derived"]
+    keys = [r["key"] for r in records]
+    assert all(k.isidentifier() and k == k.lower() for k in keys) and len(set(keys)) == len(keys)
+    assert "feed_droplets_fed_per_second_at_d_mean" in keys and "settling_stokes_velocity_smallest_fed" in keys
+
+
 def test_info_simple_droplet_rate(capsys):
     numbers = _derived("simple", capsys)
     # physics.md section 2: ~25 800 droplets/s at the 500 um mean size
