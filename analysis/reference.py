@@ -8,7 +8,7 @@ comparisons and the seed paper's figures need, in a folder of a few MB (SI units
 ``timeseries.csv``          copied as it is (columns of :data:`settler.output.TIME_SERIES`, units line first)
 ``case.toml``               the resolved case, copied with its first line's "loaded from" naming the case file from
                             ``data/`` (``data/cases/simple.toml``) instead of this machine's folder
-``merges_by_size.csv``      copied as it is, if the run has it (coalescence runs)
+``merges_by_size.csv``      copied as it is (a units line added where an older run lacks one), if the run has it
 ``channel_profile.csv``     copied as it is, if the run has it
 ``zone_profile.csv``,       the zone diagnostics (:data:`settler.output.SNAPSHOT_TABLES`), copied as they are, if the
 ``zones.csv``,              run has them
@@ -298,7 +298,7 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
             if file == "case.toml":
                 _copy_case(run / file, tmp / file)
             elif (run / file).is_file():
-                shutil.copyfile(run / file, tmp / file)
+                _copy_table(run / file, tmp / file)
 
         droplets: dict[int, dict] = {}
         slag: dict[int, dict] = {}
@@ -407,6 +407,17 @@ def _portable(metadata, command):
 
 #: The first line of a resolved case.toml (settler.cases.Case.to_toml) that names where the case was loaded from.
 LOADED_FROM = "# resolved case; loaded from "
+
+
+def _copy_table(source: Path, dest: Path) -> None:
+    """Copy a CSV unchanged, but for the units line that runs made before the engine wrote one in
+    ``merges_by_size.csv`` lack (:data:`settler.output.MERGES_BY_SIZE`): it is added, no value changed."""
+    from settler.output import MERGES_BY_SIZE, units_line
+
+    text = source.read_text(encoding="utf-8")
+    if source.name == "merges_by_size.csv" and not text.startswith("# units:"):
+        text = units_line(MERGES_BY_SIZE) + text
+    dest.write_text(text, encoding="utf-8")
 
 
 def _copy_case(source: Path, dest: Path) -> None:

@@ -38,9 +38,9 @@ import numba
 import numpy as np
 
 from settler.cases import SCHEMA, CaseError, load_case
-from settler.output import (SNAPSHOT_TABLES, OutputError, atomic_write_text, mass_balance_error, prepare_output_folder,
-                            read_table, read_time_series, time_series_frame, to_json, write_table,
-                            write_run_metadata, write_time_series)
+from settler.output import (MERGES_BY_SIZE, SNAPSHOT_TABLES, atomic_write_text, mass_balance_error, OutputError,
+                            prepare_output_folder, read_table, read_time_series, time_series_frame, to_json,
+                            write_run_metadata, write_table, write_time_series)
 
 from .coupling import smoothing
 from .coupling.filtered import filtered_width_allowed
@@ -520,7 +520,8 @@ def run_case(case, out_dir, *, end_time=None, resume=False, droplets=None, feed=
     plot_droplets(out / "droplets.png", sim.store.position[:n], sim.store.diameter[:n], sim.store.velocity[:n],
                   sim.lower, sim.upper, f"{case.case.name} at t = {sim.time:.3g} s: {n} droplets")
     if case.coalescence.enabled:
-        atomic_write_text(out / "merges_by_size.csv", size_table_frame(sim.counters.merges_by_size).to_csv(index=False))
+        write_table(size_table_frame(sim.counters.merges_by_size).to_dict("records"), MERGES_BY_SIZE,
+                    out / "merges_by_size.csv")
     summary = {"end_time": sim.time, "steps": sim.steps, "droplets": sim.store.count, **sim.counters.totals(),
                "feed_backlog": sim.backlog_mass()}
     atomic_write_text(out / "summary.json", to_json(summary))

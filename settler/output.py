@@ -144,6 +144,22 @@ SNAPSHOT_TABLES: dict[str, dict[str, tuple[str, str]]] = {
     "lift_by_size.csv": LIFT_BY_SIZE}
 
 
+#: Columns of ``merges_by_size.csv`` (full engine, coalescence on): the merges of a run by the size bins of the smaller
+#: and the larger droplet of each merged pair; name -> (unit, meaning).
+MERGES_BY_SIZE: dict[str, tuple[str, str]] = {
+    "small_low": ("m", "lower edge of the smaller droplet's size bin"),
+    "small_high": ("m", "upper edge of the smaller droplet's size bin"),
+    "large_low": ("m", "lower edge of the larger droplet's size bin"),
+    "large_high": ("m", "upper edge of the larger droplet's size bin (inf: the last bin)"),
+    "merges": ("-", "merges of such pairs since the start of the run"),
+}
+
+
+def units_line(columns: dict[str, tuple[str, str]]) -> str:
+    """The ``# units: name [unit], ...`` line that opens every CSV written here (read with ``comment="#"``)."""
+    return "# units: " + ", ".join(f"{k} [{u}]" for k, (u, _) in columns.items()) + "\n"
+
+
 #: Decimals [s] that written times are rounded to: a time accumulated from steps (34.799999999996565) is written as
 #: the output time it stands for (34.8), so that a reader can select it by that value (``ds.sel(time=34.8)``).
 TIME_DECIMALS = 9
@@ -160,8 +176,7 @@ def write_table(rows: list[dict], columns: dict[str, tuple[str, str]], path) -> 
     """Write ``rows`` (dicts with the keys of ``columns``, name -> (unit, meaning)) atomically as CSV, a units line
     first; times rounded by :func:`round_times`."""
     frame = round_times(pd.DataFrame(rows, columns=list(columns)).astype(float))
-    units = "# units: " + ", ".join(f"{k} [{u}]" for k, (u, _) in columns.items()) + "\n"
-    atomic_write_text(path, units + frame.to_csv(index=False))
+    atomic_write_text(path, units_line(columns) + frame.to_csv(index=False))
 
 
 def read_table(path) -> pd.DataFrame:

@@ -87,3 +87,22 @@ def test_licence_and_citation_name_the_seed_paper():
     assert citation["cff-version"].startswith("1.2")
     assert citation["preferred-citation"]["doi"] == "10.1016/j.heliyon.2023.e21570"
     assert "MIT License" in (ROOT / "LICENSE").read_text()
+
+
+def _csv_files() -> list[Path]:
+    """Every CSV of the stored runs (written by the full engine and analysis.reference)."""
+    return sorted((ROOT / "data" / "reference").glob("*/*.csv"))
+
+
+@pytest.mark.parametrize("path", _csv_files(), ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_every_stored_csv_reads_with_the_readme_one_liner(path):
+    """The README: 'pandas.read_csv(path, comment="#") reads it' -- and the columns are those its units line
+    names, in order, each with a unit."""
+    import pandas as pd
+
+    first = path.read_text(encoding="utf-8").splitlines()[0]
+    assert first.startswith("# units: ")
+    named = re.findall(r"(\w+) \[([^\]]*)\]", first[len("# units: "):])
+    frame = pd.read_csv(path, comment="#")
+    assert list(frame.columns) == [name for name, _ in named]
+    assert len(frame) > 0 and all(frame[c].dtype.kind in "fiu" for c in frame.columns)
