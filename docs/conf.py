@@ -6,6 +6,7 @@ all in one tool; pages are Markdown (MyST). Build: ``sphinx-build -W -b html doc
 tests/test_docs.py runs, warnings as errors).
 """
 
+import os
 import sys
 from pathlib import Path
 
@@ -32,8 +33,11 @@ myst_enable_extensions = ["dollarmath", "colon_fence", "deflist"]
 myst_heading_anchors = 3
 suppress_warnings = ["myst.header"]  # pages moved from the README start at their own level
 
-# The tutorial runs at every build; an error in a cell fails the build (never a logged failure and exit 0).
+# The tutorial runs at every build; an error in a cell fails the build (never a logged failure and exit 0). The
+# reports (rendered-reports/) run too when SETTLER_DOCS_REPORTS=1: minutes even in their quick mode on 2 cores, so
+# the default build (and the test suite's) shows them unexecuted; tests/test_reports.py executes each in CI.
 nb_execution_mode = "force"
+nb_execution_excludepatterns = [] if os.environ.get("SETTLER_DOCS_REPORTS") == "1" else ["rendered-reports/*"]
 nb_execution_timeout = 600
 nb_execution_raise_on_error = True
 nb_execution_show_tb = True
@@ -50,9 +54,47 @@ html_title = f"settler {release}"
 html_static_path = []
 
 
+#: Folder (in docs/, ignored by git) of the report notebooks the build writes from reports/*.py and executes.
+REPORT_PAGES = "rendered-reports"
+
+
+def write_reports(srcdir: Path) -> None:
+    """Each report of reports/ (analysis.report.report_files) as a notebook in docs/rendered-reports/, with the
+    cell papermill would inject after its parameters cell setting ``quick = True``: the build executes it (quick
+    mode, seconds each) and renders it as a page. Unchanged notebooks are not rewritten."""
+    import nbformat
+
+    from analysis.report import INJECTED_TAG, PARAMETERS_TAG, read_report, report_files, title
+
+    out = srcdir / REPORT_PAGES
+    out.mkdir(exist_ok=True)
+    wanted = set()
+    for path in report_files():
+        notebook = read_report(path)
+        at = next(i for i, cell in enumerate(notebook.cells) if PARAMETERS_TAG in cell.metadata.get("tags", []))
+        injected = nbformat.v4.new_code_cell("# quick mode for the documentation (settler report NAME "
+                                             "--param quick=true renders the same)\nquick = True",
+                                             metadata={"tags": [INJECTED_TAG]})
+        notebook.cells.insert(at + 1, injected)
+        if not title(notebook):
+            notebook.cells.insert(0, nbformat.v4.new_markdown_cell(f"# {path.stem}"))
+        notebook.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+        text = nbformat.writes(notebook)
+        target = out / f"{path.stem}.ipynb"
+        wanted.add(target.name)
+        if not target.is_file() or target.read_text() != text:
+            target.write_text(text)
+    for stale in out.glob("*.ipynb"):
+        if stale.name not in wanted:
+            stale.unlink()
+
+
 def write_generated(app):
-    """Pages generated from the code before the build reads them: the case-key reference from the schema."""
+    """Pages generated from the code before the build reads them: the case-key reference from the schema and the
+    reports as notebooks."""
     from settler.cli import schema_markdown
+
+    write_reports(Path(app.srcdir))
 
     out = Path(app.srcdir) / "_generated"
     out.mkdir(exist_ok=True)
