@@ -123,12 +123,12 @@ def slice_slag(run, time=None, ax=None) -> Figure:
         arrows = ax.quiver(1e3 * grid["x"][sub], 1e3 * grid["z"][sub], 1e3 * grid["u"][sub], 1e3 * grid["w"][sub],
                            color="white", edgecolor="black", linewidth=0.6, width=0.006)
         key = float(f"{1e3 * largest / 2:.1g}")  # a round speed about half the largest [mm/s]
-        ax.quiverkey(arrows, 0.80, 1.02, key, f"{key:g} mm/s", labelpos="E", coordinates="axes", color="black")
+        ax.quiverkey(arrows, 0.82, 1.025, key, f"{key:g} mm/s", labelpos="E", coordinates="axes", color="black")
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("height z [mm]")
     ax.set_title(f"{_case_name(run)}: slag flow at y = {1e3 * float(centres[layer, 1].mean()):.3g} mm, t = {t:g} s",
-                 fontsize="medium")
+                 fontsize="medium", loc="left")
     return fig
 
 
