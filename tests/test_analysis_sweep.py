@@ -242,3 +242,16 @@ def test_quick_furnace_study_ranks_every_axis(tmp_path):
     tables = [t.table for t in results["trends"].values()] + [results["morris"].table]
     hashes = set(pd.concat(tables)["hash"])
     assert len(list((tmp_path / "points").iterdir())) == len(hashes) < sum(len(t) for t in tables)
+
+
+@pytest.mark.parametrize("key, values, factor, label", [
+    ("feed.mean_diameter", [1e-4, 3e-4], 1e6, "feed mean diameter [µm]"),
+    ("geometry.inlet_diameter", [0.02, 0.075], 1e3, "geometry inlet diameter [mm]"),
+    ("geometry.height", [0.5, 2.0], 1.0, "geometry height [m]"),
+    ("slag.temperature", [1493.0, 1593.0], 1.0, "slag temperature [K]"),
+])
+def test_plot_axes_name_keys_in_words_and_lengths_in_readable_units(key, values, factor, label):
+    """Trends plots: no case key as a label, no diameter in m with a 1e-4 offset."""
+    from analysis.sweep.results import axis_scale
+
+    assert axis_scale(key, values) == (factor, label)

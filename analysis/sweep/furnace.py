@@ -12,7 +12,7 @@ from settler.cases import case_with_overrides
 from settler.output import atomic_write_text, prepare_output_folder, source_commit, to_json
 
 from .execution import POINTS, Executor, sweep
-from .results import _save_png, _style
+from .results import _save_png, _style, axis_scale
 
 
 #: Baseline of the furnace study: the furnace preset with these overrides. The feed is a truncated normal, the only
@@ -133,8 +133,9 @@ def plot_study(trends: dict):
     axes = fig.subplots(2, math.ceil(len(trends) / 2)).ravel()
     for ax, (key, trend) in zip(axes, trends.items()):
         ok = trend.table[trend.table["status"] == "done"].sort_values(key)
-        ax.plot(ok[key], ok["matte_loss"] * 100.0, "o-", ms=3)
-        _style(ax, key, "matte_loss", ok["matte_loss"])
+        factor, label = axis_scale(key, ok[key])
+        ax.plot(ok[key] * factor, ok["matte_loss"] * 100.0, "o-", ms=3)
+        _style(ax, key, "matte_loss", ok["matte_loss"], label)
         ax.set_ylabel("matte loss [%]")
     fig.suptitle("furnace: matte lost with the slag, one key at a time (others at the study baseline)")
     return fig

@@ -84,17 +84,36 @@ def _save_png(fig, path: Path) -> Path:
     return path
 
 
-def _axis_label(key: str) -> str:
+#: Smaller units for lengths: (largest value below which it is used [m], factor, unit).
+LENGTH_UNITS = ((1e-3, 1e6, "µm"), (1e-1, 1e3, "mm"))
+
+
+def axis_scale(key: str, values=None) -> tuple[float, str]:
+    """(factor, label) of a case key on a plot axis: the key in words ("slag.temperature" -> "slag temperature")
+    with its unit, lengths below 0.1 m in mm and below 1 mm in µm (``values`` [SI] decide), so that no axis shows
+    a diameter in m with an offset."""
     unit = _field(key).unit
-    return f"{key} [{unit}]" if unit and unit != "-" else key
+    words = key.replace(".", " ").replace("_", " ")
+    factor = 1.0
+    if unit == "m" and values is not None:
+        v = np.abs(np.asarray(values, dtype=float))
+        v = v[np.isfinite(v)]
+        if v.size:
+            for limit, scale, name in LENGTH_UNITS:
+                if v.max() < limit:
+                    factor, unit = scale, name
+                    break
+    return factor, (f"{words} [{unit}]" if unit and unit not in ("-", "–") else words)
 
 
-def _style(ax, key: str, metric: str, values) -> None:
-    """Axis label and grid; scientific x ticks for small numbers (diameters in m); a log y axis for the loss when
-    it spans more than two decades (all > 0)."""
-    ax.set_xlabel(_axis_label(key))
-    if _field(key).kind in (float, int):
-        ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))
+def _axis_label(key: str) -> str:
+    return axis_scale(key)[1]
+
+
+def _style(ax, key: str, metric: str, values, label: str | None = None) -> None:
+    """Axis label (``label``, else the key in words with its unit) and grid; a log y axis for the loss when it
+    spans more than two decades (all > 0)."""
+    ax.set_xlabel(label or _axis_label(key))
     y = np.asarray(values, dtype=float)
     y = y[np.isfinite(y)]
     if metric == "matte_loss" and y.size and y.min() > 0.0 and y.max() > 100.0 * y.min():
@@ -122,21 +141,24 @@ def plot_trends(table: pd.DataFrame, plan: Design, key: str, title: str = ""):
     axes = fig.subplots(1, len(PLOTTED))
     for ax, (metric, (label, scale)) in zip(axes, PLOTTED.items()):
         labels = None
+        factor, xlabel = axis_scale(key, ok[key] if pd.api.types.is_numeric_dtype(ok[key]) else None)
         if plan.name != "grid":
             x, labels = _positions(ok[key])
-            ax.scatter(x, ok[metric] * scale, s=12, alpha=0.7)
+            ax.scatter(x * (factor if labels is None else 1.0), ok[metric] * scale, s=12, alpha=0.7)
         else:
             groups = list(ok.groupby(others, sort=True)) if others else [((), ok)]
             if len(groups) <= MAX_LINES:
                 for name, group in groups:
                     group = group.sort_values(key)
                     x, labels = _positions(group[key])
+                    x = x * (factor if labels is None else 1.0)
                     text = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
                                      for k, v in zip(others, name if isinstance(name, tuple) else (name,)))
                     ax.plot(x, group[metric] * scale, "o-", ms=3, label=text or None)
             else:
                 summary = ok.groupby(key, sort=True)[metric].agg(["median", "min", "max"]).reset_index()
                 x, labels = _positions(summary[key])
+                x = x * (factor if labels is None else 1.0)
                 ax.plot(x, summary["median"] * scale, "o-", ms=3, label=f"median over {len(groups)} others")
                 ax.fill_between(x, summary["min"] * scale, summary["max"] * scale, alpha=0.25, label="range")
         if labels is not None:
@@ -144,7 +166,7 @@ def plot_trends(table: pd.DataFrame, plan: Design, key: str, title: str = ""):
             ax.set_xlabel(_axis_label(key))
             ax.grid(alpha=0.3)
         else:
-            _style(ax, key, metric, ok[metric])
+            _style(ax, key, metric, ok[metric], xlabel)
         ax.set_ylabel(label)
     if axes[0].get_legend_handles_labels()[0]:
         axes[0].legend(fontsize=7)
