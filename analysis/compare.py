@@ -310,8 +310,11 @@ def comparison_figure(comparison: Comparison):
         scale, unit = DISPLAY[COLUMNS[column][0]]
         ax.plot(comparison.table["time"], scale * comparison.table[f"{column}_full"], label="full (fulldem)")
         ax.plot(reduced["time"], scale * reduced[column], label="reduced (popbal)", linestyle="--")
+        low, high = ax.get_ylim()  # headroom above the curves for the windows' notes
+        ax.set_ylim(low, high + (0.12 + 0.09 * max(window_levels(comparison.windows), default=0)) * (high - low))
         _shade_windows(ax, comparison, column)
-        ax.set_ylabel(f"{column} [{unit}]")
+        words = column.replace("_", " ")
+        ax.set_ylabel(f"{words} [{unit}]" if unit != "-" else words)
         ax.grid(alpha=0.3)
     for ax in axes[len(columns):]:
         ax.set_visible(False)
