@@ -196,9 +196,9 @@ def torus_figure(cloud, times, centroid, shots):
     grid = fig.add_gridspec(3, count + 1, width_ratios=[1] * count + [1.5])
     for j, (t, fallen, positions) in enumerate(shots):
         rel = (positions - np.median(positions, axis=0)) / radius
-        views = [(np.ones(len(rel), bool), (0, 2), "k", 1.5, (-3.0, 2.0), "z/R"),
-                 (np.abs(rel[:, 1]) < 0.25, (0, 2), "C3", 4.0, (-3.0, 2.0), "z/R"),
-                 (np.abs(rel[:, 2]) < 1.5, (0, 1), "C0", 1.5, (-2.2, 2.2), "y/R")]
+        views = [(np.ones(len(rel), bool), (0, 2), "k", 1.5, (-3.0, 2.0), "side view, all droplets\nz/R"),
+                 (np.abs(rel[:, 1]) < 0.25, (0, 2), "C3", 4.0, (-3.0, 2.0), "side view, slice |y| < R/4\nz/R"),
+                 (np.abs(rel[:, 2]) < 1.5, (0, 1), "C0", 1.5, (-2.2, 2.2), "top view, |z| < 1.5 R\ny/R")]
         for i, (keep, (a, b), colour, size, ylim, ylabel) in enumerate(views):
             ax = fig.add_subplot(grid[i, j])
             ax.scatter(rel[keep, a], rel[keep, b], s=size, c=colour, lw=0)
