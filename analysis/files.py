@@ -116,8 +116,21 @@ def droplets_file(path) -> pd.DataFrame:
 
 
 def slag_file(path) -> tuple[np.ndarray, np.ndarray]:
-    """(cell centres (n, 3) [m], cell velocity (n, 3) [m/s]) of one slag snapshot file (``fluid_NNNNN.vtu``); a
-    cell's centre is the mean of its 8 corner points. Raises NoData if it holds no hexahedra with a velocity."""
+    """(cell centres (n, 3) [m], cell velocity (n, 3) [m/s]) of one slag snapshot file: ``fluid_NNNNN.vti`` (image
+    data, :mod:`settler.vti`) or, from runs made before it, ``fluid_NNNNN.vtu`` (hexahedra; a cell's centre is the
+    mean of its 8 corner points). Raises NoData if it holds no cells with a velocity."""
+    if Path(path).suffix == ".vti":
+        from settler.vti import read_image
+
+        try:
+            shape, origin, spacing, fields = read_image(path)
+        except ValueError as exc:
+            raise NoData(str(exc)) from None
+        if "velocity" not in fields or 0 in shape:
+            raise NoData(f"{Path(path).name}: no cells with a velocity")
+        axes = [origin[a] + (np.arange(shape[a]) + 0.5) * spacing for a in range(3)]
+        centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        return centres, fields["velocity"].reshape(-1, 3)
     import meshio
 
     mesh = meshio.read(path)
@@ -127,6 +140,70 @@ def slag_file(path) -> tuple[np.ndarray, np.ndarray]:
         raise NoData(f"{path.name}: no hexahedral cells with a velocity")
     centres = np.asarray(mesh.points, dtype=float)[np.asarray(cells)].mean(axis=1)
     return centres, np.asarray(velocity, dtype=float).reshape(-1, 3)
+
+
+def slag_plane(path: Path, y0: float) -> dict[str, np.ndarray]:
+    """The slag velocity on the cell layer of a slag snapshot (``fluid_NNNNN.vti``, or an older run's
+    ``fluid_NNNNN.vtu``) nearest to y = ``y0`` [m] (the mean of the two layers equally near): slag_x, slag_z [m] of
+    the cell centres, slag_velocity (n, 3) [m/s] as float32, sorted by z then x, and the plane's slag_y [m]. Empty
+    dict if the file has no cells with a velocity; ValueError naming an unreadable file."""
+    import meshio
+
+    path = Path(path)
+    if path.suffix == ".vti":  # image data: the cell centres from the grid, the same layer rule
+        try:
+            centres, velocity = slag_file(path)
+        except NoData:
+            return {}
+        return _plane_of(centres, velocity, y0)
+    try:
+        mesh = meshio.read(path)
+    except Exception as exc:
+        raise ValueError(f"{path}: cannot be read as a slag snapshot ({type(exc).__name__}: {exc})") from None
+    cells = mesh.cells_dict.get("hexahedron")
+    velocity = mesh.cell_data_dict.get("velocity", {}).get("hexahedron")
+    if cells is None or velocity is None or len(cells) == 0:
+        return {}
+    points = np.asarray(mesh.points, dtype=float)
+    cells = np.asarray(cells)
+    velocity = np.asarray(velocity, dtype=float).reshape(-1, 3)
+    y = sum(points[cells[:, c], 1] for c in range(8)) / 8.0  # centres' y only, corner by corner (a large grid)
+    layer = _layer(y, y0)
+    corners = points[cells[layer]]  # (layer cells, 8, 3)
+    return _plane(corners[..., 0].mean(axis=1), corners[..., 2].mean(axis=1), velocity[layer], y[layer])
+
+
+def _layer(y: np.ndarray, y0: float) -> np.ndarray:
+    """Indices of the cells on the layer of centres ``y`` [m] nearest to ``y0`` (both layers where two are equally
+    near)."""
+    levels = np.unique(y)
+    gaps = np.diff(levels)
+    spacing_y = float(gaps[gaps > 0].min()) if np.any(gaps > 0) else 1.0
+    distance = np.abs(y - y0)
+    return np.flatnonzero(distance <= distance.min() + 1e-6 * spacing_y)
+
+
+def _plane_of(centres: np.ndarray, velocity: np.ndarray, y0: float) -> dict[str, np.ndarray]:
+    """The plane of :func:`_read_slag_plane` from cell centres (n, 3) [m] and velocities (n, 3) [m/s]."""
+    layer = _layer(centres[:, 1], y0)
+    return _plane(centres[layer, 0], centres[layer, 2], velocity[layer], centres[layer, 1])
+
+
+def _plane(x, z, velocity, y) -> dict[str, np.ndarray]:
+    """Average the layer cells sharing x and z (the two layers equally near), sorted by z then x."""
+    extent = max(float(np.ptp(x)) if x.size else 0.0, float(np.ptp(z)) if z.size else 0.0, 1e-300)
+    tolerance = 1e-6 * extent
+    keys = np.stack([np.rint(z / tolerance), np.rint(x / tolerance)], axis=1)  # the two layers share x and z
+    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    counts = np.bincount(inverse, minlength=len(unique)).astype(float)
+
+    def mean(values):
+        return np.bincount(inverse, weights=values, minlength=len(unique)) / counts
+
+    plane_v = np.stack([mean(velocity[:, a]) for a in range(3)], axis=1)
+    return {"slag_x": mean(x).astype(np.float32), "slag_z": mean(z).astype(np.float32),
+            "slag_velocity": plane_v.astype(np.float32), "slag_y": np.float64(y.mean())}
 
 
 def read_json(path: Path, error=OutputError):

@@ -1,7 +1,7 @@
 """Reference runs stored small in the repository: ``data/reference/<case>/``.
 
 A full-engine run folder (``settler full CASE --out RUN``) holds hundreds of MB: numbered droplet and slag
-snapshots (``droplets_NNNNN.vtu``, ``fluid_NNNNN.vtu``) and a checkpoint. :func:`store_reference` keeps what
+snapshots (``droplets_NNNNN.vtu``, ``fluid_NNNNN.vti``) and a checkpoint. :func:`store_reference` keeps what
 comparisons and the seed paper's figures need, in a folder of a few MB (SI units throughout):
 
 ==========================  ==========================================================================================
@@ -145,44 +145,13 @@ def _read_droplets(path: Path) -> dict[str, np.ndarray]:
 
 
 def _read_slag_plane(path: Path, y0: float) -> dict[str, np.ndarray]:
-    """The slag velocity on the cell layer of ``fluid_NNNNN.vtu`` nearest to y = ``y0`` [m] (the mean of the two
-    layers equally near): x, z [m] of the cell centres, velocity (n, 3) [m/s] as float32, sorted by z then x, and
-    the plane's y [m]. Empty dict if the file has no hexahedral cells with a velocity."""
-    import meshio
+    """:func:`analysis.files.slag_plane` of one slag snapshot, an unreadable file a StoreError naming it."""
+    from .files import slag_plane
 
     try:
-        mesh = meshio.read(path)
-    except Exception as exc:
-        raise StoreError(f"{path}: cannot be read as a slag snapshot ({type(exc).__name__}: {exc})") from None
-    cells = mesh.cells_dict.get("hexahedron")
-    velocity = mesh.cell_data_dict.get("velocity", {}).get("hexahedron")
-    if cells is None or velocity is None or len(cells) == 0:
-        return {}
-    points = np.asarray(mesh.points, dtype=float)
-    cells = np.asarray(cells)
-    velocity = np.asarray(velocity, dtype=float).reshape(-1, 3)
-    y = sum(points[cells[:, c], 1] for c in range(8)) / 8.0  # centres' y only, corner by corner (a large grid)
-    levels = np.unique(y)
-    gaps = np.diff(levels)
-    spacing_y = float(gaps[gaps > 0].min()) if np.any(gaps > 0) else 1.0
-    distance = np.abs(y - y0)
-    layer = np.flatnonzero(distance <= distance.min() + 1e-6 * spacing_y)
-    corners = points[cells[layer]]  # (layer cells, 8, 3)
-    x = corners[..., 0].mean(axis=1)
-    z = corners[..., 2].mean(axis=1)
-    extent = max(float(np.ptp(x)) if x.size else 0.0, float(np.ptp(z)) if z.size else 0.0, 1e-300)
-    tolerance = 1e-6 * extent
-    keys = np.stack([np.rint(z / tolerance), np.rint(x / tolerance)], axis=1)  # the two layers share x and z
-    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    counts = np.bincount(inverse, minlength=len(unique)).astype(float)
-
-    def mean(values):
-        return np.bincount(inverse, weights=values, minlength=len(unique)) / counts
-
-    plane_v = np.stack([mean(velocity[layer, a]) for a in range(3)], axis=1)
-    return {"slag_x": mean(x).astype(np.float32), "slag_z": mean(z).astype(np.float32),
-            "slag_velocity": plane_v.astype(np.float32), "slag_y": np.float64(y[layer].mean())}
+        return slag_plane(path, y0)
+    except ValueError as exc:
+        raise StoreError(str(exc)) from None
 
 
 # ------------------------------------------------------------------------------------------------------- storing
@@ -415,8 +384,8 @@ def _copy_table(source: Path, dest: Path) -> None:
     from settler.output import MERGES_BY_SIZE, units_line
 
     text = source.read_text(encoding="utf-8")
-    if source.name == "merges_by_size.csv" and not text.startswith("# units:"):
-        text = units_line(MERGES_BY_SIZE) + text
+    if source.name == "merges_by_size.csv" and text.split("\n", 1)[0].strip() == ",".join(MERGES_BY_SIZE):
+        text = units_line(MERGES_BY_SIZE) + text  # the engine's header without its units line
     dest.write_text(text, encoding="utf-8")
 
 

@@ -5,7 +5,7 @@ Outputs in DIR (all written atomically):
 * ``case.toml`` (the resolved case) and ``metadata.json`` (engine, units, grid, steps, start-up numbers);
 * ``timeseries.csv`` with the columns of :data:`settler.output.TIME_SERIES`, a row every
   ``fulldem.output_interval`` of simulated time;
-* ``snapshots.pvd`` with ``droplets_NNNNN.vtu`` / ``fluid_NNNNN.vtu`` every ``fulldem.snapshot_interval`` (open the
+* ``snapshots.pvd`` with ``droplets_NNNNN.vtu`` / ``fluid_NNNNN.vti`` (the slag as VTK image data) every ``fulldem.snapshot_interval`` (open the
   .pvd in ParaView);
 * ``timeseries.png`` and ``droplets.png`` (side and top views coloured by settling velocity) at the end;
 * ``checkpoint.npz`` every ``fulldem.checkpoint_interval`` seconds of wall time and at the end: ``--resume``

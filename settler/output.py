@@ -199,7 +199,7 @@ def read_channel_profile(path) -> pd.DataFrame:
 RUN_FILES = ("case.toml", "metadata.json", "timeseries.csv", "timeseries.png", "summary.json", "checkpoint.npz",
              "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz", "merges_by_size.csv",
              "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv")
-SNAPSHOT_PATTERNS = ("droplets_*.vtu", "fluid_*.vtu")
+SNAPSHOT_PATTERNS = ("droplets_*.vtu", "fluid_*.vti", "fluid_*.vtu")
 
 
 def time_series_frame(rows: list[dict] | dict[str, np.ndarray]) -> pd.DataFrame:

@@ -66,13 +66,16 @@ def test_netcdf_round_trip_is_exact_and_compressed(reduced, tmp_path):
     run = load_run(folder)
     path = run.to_netcdf(tmp_path / "distribution.nc")
     back = read_netcdf(path)
-    xr.testing.assert_identical(back, run.distribution())  # values (NaN included), coords, dims and attrs
-    assert back.number_density.attrs["units"] == "1/m^3" and back.time.attrs["units"] == "s"
+    xr.testing.assert_equal(back, run.distribution())  # values (NaN included), coords and dims
+    # attributes as written, in CF-1.10 (analysis.cf): UDUNITS units, axis attributes, the conventions named
+    assert back.number_density.attrs["units"] == "m-3" and back.time.attrs["units"] == "s"
+    assert back.time.attrs["axis"] == "T" and back.attrs["Conventions"] == "CF-1.10"
     assert back.time.dtype == np.float64  # seconds stay seconds (no timedelta decoding)
     assert back.number_density.encoding["zlib"] and back.number_density.encoding["complevel"] == 4
     series = read_netcdf(run.to_netcdf(tmp_path / "timeseries.nc", part="timeseries"))
-    xr.testing.assert_identical(series, run.timeseries_dataset())
+    xr.testing.assert_equal(series, run.timeseries_dataset())
     assert series.mass_fed.attrs == {"units": "kg", "long_name": TIME_SERIES["mass_fed"][1]}
+    assert "[case]" in series.attrs["settler_case"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["distribution.nc", "timeseries.nc"]  # no temporaries
     with pytest.raises(ValueError, match="part = 'x'"):
         run.to_netcdf(tmp_path / "x.nc", part="x")
@@ -167,5 +170,6 @@ def test_write_netcdf_leaves_the_old_file_on_failure(tmp_path):
     bad = xr.Dataset({"v": ("time", np.arange(3.0))}, attrs={"unsupported": {"a": 1}})  # dict attrs cannot be written
     with pytest.raises((TypeError, ValueError)):
         write_netcdf(bad, path)
-    xr.testing.assert_identical(read_netcdf(path), good)
+    xr.testing.assert_equal(read_netcdf(path), good)
+    assert read_netcdf(path).attrs["Conventions"] == "CF-1.10"
     assert [p.name for p in tmp_path.iterdir()] == ["a.nc"]

@@ -16,7 +16,8 @@ from fulldem.io import progress as fio_progress
 from fulldem.io import snapshots as fio_snapshots
 from fulldem.io.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fulldem.io.progress import Progress
-from fulldem.io.snapshots import SnapshotWriter
+from fulldem.io.snapshots import SnapshotWriter, cell_centre_velocity
+from settler.vti import read_image
 
 
 pytest.importorskip("tqdm")
@@ -164,6 +165,37 @@ def _store(n):
     return store
 
 
+def test_slag_image_data_holds_each_cell_where_vtk_puts_it(tmp_path):
+    """fluid_NNNNN.vti: cell (i, j, k) of our (nx, ny, nz) arrays is VTK's cell i + nx (j + ny k), its value and
+    its place; read back by settler.vti and, where the vtk package is installed, by VTK's own reader."""
+    grid = Grid((3, 4, 5), 0.01, lower=(0.1, 0.2, 0.3))
+    rng = np.random.default_rng(3)
+    fluid = FluidState(*(rng.normal(size=a.shape) for a in grid.zeros_faces()), rng.normal(size=grid.shape))
+    phi = rng.uniform(0.5, 1.0, grid.shape)
+    SnapshotWriter(tmp_path, grid).write(0.0, _store(0), fluid, phi)
+    path = tmp_path / "fluid_00000.vti"
+    shape, origin, spacing, fields = read_image(path)
+    centre = cell_centre_velocity(grid, fluid.u, fluid.v, fluid.w)
+    np.testing.assert_array_equal(fields["velocity"], centre.astype(np.float32))
+    np.testing.assert_array_equal(fields["pressure"], fluid.p.astype(np.float32))
+    np.testing.assert_array_equal(fields["void_fraction"], phi.astype(np.float32))
+    np.testing.assert_allclose(origin, grid.lower)
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    reader = vtk.vtkXMLImageDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    image = reader.GetOutput()
+    assert image.GetDimensions() == (4, 5, 6) and image.GetSpacing() == (0.01, 0.01, 0.01)
+    velocity = vtk_to_numpy(image.GetCellData().GetArray("velocity"))
+    for i, j, k in [(0, 0, 0), (2, 1, 3), (1, 3, 4)]:
+        cell = i + 3 * (j + 4 * k)
+        np.testing.assert_array_equal(velocity[cell], centre[i, j, k].astype(np.float32))
+        bounds = image.GetCell(cell).GetBounds()
+        np.testing.assert_allclose(bounds[::2], np.asarray(grid.lower) + 0.01 * np.array([i, j, k]), atol=1e-12)
+
+
 def test_snapshots_read_back_with_meshio(tmp_path):
     grid = Grid((2, 3, 4), 0.0025)
     fluid = FluidState(*grid.zeros_faces(), grid.zeros_cells())
@@ -186,8 +218,9 @@ def test_snapshots_read_back_with_meshio(tmp_path):
     assert [c.type for c in m3.cells] == ["vertex"] and len(m3.cells[0]) == 3
 
     for index in (0, 1):
-        f = meshio.read(tmp_path / f"fluid_{index:05d}.vtu")
-        assert len(f.cells[0]) == 24
+        shape, origin, spacing, fields = read_image(tmp_path / f"fluid_{index:05d}.vti")
+        assert shape == (2, 3, 4) and spacing == 0.0025 and set(fields) == {"velocity", "pressure", "void_fraction"}
+        assert fields["velocity"].shape == (2, 3, 4, 3) and np.all(fields["void_fraction"] == 1.0)
     pvd = (tmp_path / "snapshots.pvd").read_text()
     assert pvd.count("<DataSet") == 4 and 'timestep="0.5"' in pvd
 

@@ -22,7 +22,7 @@ def test_run_writes_every_output(tmp_path):
     assert frame["time"].iloc[-1] == pytest.approx(0.1)
     assert frame["mass_fed"].iloc[-1] > 0 and (np.abs(frame["mass_balance_error"]) < 1e-12).all()
     for name in ("case.toml", "metadata.json", "timeseries.csv", "snapshots.pvd", "checkpoint.npz",
-                 "droplets_00000.vtu", "fluid_00002.vtu", "summary.json", "timeseries.png", "droplets.png"):
+                 "droplets_00000.vtu", "fluid_00002.vti", "summary.json", "timeseries.png", "droplets.png"):
         assert (tmp_path / name).exists(), name
     meta = json.loads((tmp_path / "metadata.json").read_text())
     assert meta["engine"] == "fulldem" and meta["dem_substeps"] >= 1

@@ -2,7 +2,7 @@
 
 A run folder is what ``settler full CASE --out RUN`` writes (SI units throughout): ``timeseries.csv`` (columns of
 :data:`settler.output.TIME_SERIES`), ``snapshots.pvd`` listing ``droplets_NNNNN.vtu`` (part 0) and
-``fluid_NNNNN.vtu`` (part 1) per snapshot time, ``channel_profile.csv``, ``case.toml`` and ``metadata.json``.
+``fluid_NNNNN.vti`` (part 1; ``.vtu`` hexahedra in older runs) per snapshot time, ``channel_profile.csv``, ``case.toml`` and ``metadata.json``.
 This module reads those files only (pandas, NumPy, meshio, matplotlib); it never imports an engine, so it works on
 a machine where none is built, on a finished run, a stopped one or one still running.
 

@@ -1,9 +1,11 @@
 """Snapshots that ParaView opens.
 
-Snapshots are written with meshio (a maintained library for mesh formats) as VTK XML unstructured grids:
+Droplets are written with meshio (a maintained library for mesh formats) as VTK XML unstructured grids,
 ``droplets_NNNNN.vtu`` (one vertex per droplet; point data diameter [m], velocity [m/s], density [kg/m^3],
-age [s], ident) and ``fluid_NNNNN.vtu`` (hexahedral cells; cell data velocity at cell centres [m/s], dynamic
-pressure [Pa], void fraction [-]). ``snapshots.pvd`` lists them with their simulated times, so ParaView plays
+age [s], ident); the slag as VTK XML image data, ``fluid_NNNNN.vti`` (:mod:`settler.vti`: the uniform grid with
+cell data velocity at cell centres [m/s], dynamic pressure [Pa], void fraction [-], float32), which ParaView opens
+as an image (slices, volume rendering, contours) and which stores no points or cells. Runs made before
+2026-12-03 wrote the slag as hexahedra in ``fluid_NNNNN.vtu``; the readers take both. ``snapshots.pvd`` lists them with their simulated times, so ParaView plays
 the series with the right time axis. Every file is written atomically.
 """
 
@@ -17,6 +19,7 @@ import meshio
 import numpy as np
 
 from settler.output import atomic_write_bytes, atomic_write_text
+from settler.vti import image_bytes
 
 from ..droplets import MERGED
 
@@ -62,22 +65,6 @@ def cell_centre_velocity(grid, u, v, w):
     return out
 
 
-def _hexahedra(grid):
-    nx, ny, nz = grid.shape
-    xs, ys, zs = (grid.lower[a] + np.arange(grid.shape[a] + 1) * grid.spacing for a in range(3))
-    points = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1).reshape(-1, 3)
-
-    def node(i, j, k):
-        return (i * (ny + 1) + j) * (nz + 1) + k
-
-    i, j, k = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
-    i, j, k = i.ravel(), j.ravel(), k.ravel()
-    cells = np.stack([node(i, j, k), node(i + 1, j, k), node(i + 1, j + 1, k), node(i, j + 1, k),
-                      node(i, j, k + 1), node(i + 1, j, k + 1), node(i + 1, j + 1, k + 1), node(i, j + 1, k + 1)],
-                     axis=1)
-    return points, cells
-
-
 class SnapshotWriter:
     """Writes numbered droplet and fluid snapshots and keeps ``snapshots.pvd`` up to date."""
 
@@ -85,22 +72,17 @@ class SnapshotWriter:
         self.out_dir = Path(out_dir)
         self.grid = grid
         self.entries = list(entries or [])  # (time, file) pairs
-        self._hex = None
 
     def write(self, time, droplets, fluid, void_fraction):
         index = len({t for t, _ in self.entries})
         cloud, compression = _droplet_cloud(droplets)
         name_d = f"droplets_{index:05d}.vtu"
         atomic_write_bytes(self.out_dir / name_d, _mesh_bytes(cloud, compression))
-        if self._hex is None:
-            self._hex = _hexahedra(self.grid)
-        points, cells = self._hex
-        velocity = cell_centre_velocity(self.grid, fluid.u, fluid.v, fluid.w).reshape(-1, 3)
-        mesh = meshio.Mesh(points, [("hexahedron", cells)],
-                           cell_data={"velocity": [velocity], "pressure": [fluid.p.ravel()],
-                                      "void_fraction": [void_fraction.ravel()]})
-        name_f = f"fluid_{index:05d}.vtu"
-        atomic_write_bytes(self.out_dir / name_f, _mesh_bytes(mesh))
+        velocity = cell_centre_velocity(self.grid, fluid.u, fluid.v, fluid.w)
+        name_f = f"fluid_{index:05d}.vti"
+        atomic_write_bytes(self.out_dir / name_f, image_bytes(
+            self.grid.shape, self.grid.lower, self.grid.spacing,
+            {"velocity": velocity, "pressure": fluid.p, "void_fraction": np.asarray(void_fraction)}))
         self.entries += [(time, name_d), (time, name_f)]
         self._write_pvd()
 
