@@ -16,7 +16,7 @@ from analysis import load_run
 ROOT = Path(__file__).resolve().parents[1]
 STORED = sorted(p.parent for p in (ROOT / "data" / "reference").glob("*/reference.json"))
 #: Runs made by an older engine, kept until their regeneration is stored (data/reference/README.md lists them).
-AWAITING_REGENERATION = {"deep"}
+AWAITING_REGENERATION: set[str] = set()
 #: Strings that would name a machine's folders.
 MACHINE_PATHS = re.compile(r"(^|[\s'\"=])/(work|home|tmp|root|Users|mnt|scratch)/")
 #: Relative mass-accounting error allowed in a stored run's time series [-] (the engine holds it to round-off).
