@@ -261,8 +261,7 @@ def write_time_series(frame: pd.DataFrame, path: str | os.PathLike) -> None:
     """Write a time series as CSV atomically, with a header comment line giving every column's unit (read it with
     ``pandas.read_csv(path, comment="#")``); times rounded by :func:`round_times`."""
     frame = round_times(frame)
-    units = ", ".join(f"{c} [{TIME_SERIES[c][0]}]" for c in frame.columns)
-    atomic_write_text(path, f"# units: {units}\n" + frame.to_csv(index=False))
+    atomic_write_text(path, units_line({c: TIME_SERIES[c] for c in frame.columns}) + frame.to_csv(index=False))
 
 
 def read_time_series(path: str | os.PathLike) -> pd.DataFrame:

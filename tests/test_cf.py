@@ -67,6 +67,7 @@ def test_every_writer_applies_the_conventions(tmp_path):
             assert back["loss"].attrs["units"] == "1"
             assert back["z"].attrs == {"units": "m", "axis": "Z", "standard_name": "height", "positive": "up"}
     assert dataset.attrs.get("Conventions") is None  # the caller's dataset is left as it was
+    assert dataset["loss"].attrs == {"units": "-"} and "axis" not in dataset["z"].attrs
 
 
 def test_apply_leaves_strings_without_units():
