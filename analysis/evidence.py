@@ -21,6 +21,8 @@ droplets, and the collision efficiency of the kernel run (SI units throughout).
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -118,23 +120,45 @@ def pair_exposure(snapshots, small: tuple[float, float], large: tuple[float, flo
 
 def collision_efficiency(merges: int, exposure: dict, diameter_small: float, diameter_large: float) -> dict:
     """E = merges / (pi (a_s + a_l)^2 integral abs(U_l - U_s) C dt) with C = sum N_s N_l / V over slices
-    (:func:`pair_exposure`), trapezoidal over the snapshots; standard error from the Poisson count (sqrt M / M)
-    and the standard error of the mean velocity difference over the snapshots, in quadrature. Returns {"efficiency",
-    "standard_error", "expected_collisions", "merges", "velocity_difference" [m/s]}."""
-    t = exposure["times"]
-    du = np.abs(exposure["velocity_large"] - exposure["velocity_small"])
-    c = exposure["exposure"]
+    (:func:`pair_exposure`), trapezoidal over the snapshots.
+
+    Droplets placed at rest (a snapshot whose two mean velocities are both exactly 0: the initial state) reach their
+    terminal velocity within the particle relaxation time rho_p d^2 / (18 mu), about 1 ms here, so such a snapshot
+    takes the velocity difference of the next one; with 0 the first interval would count half its collisions.
+    Standard error: the Poisson count (sqrt M / M), the standard error of the mean velocity difference over the
+    snapshots and the time quadrature (the change of E when every second snapshot is dropped, a first-order
+    estimate of the error of the trapezoidal rule at the snapshots' spacing), in quadrature. Returns {"efficiency",
+    "standard_error", "quadrature_error", "expected_collisions", "merges", "velocity_difference" [m/s]}."""
+    t = np.asarray(exposure["times"], dtype=float)
+    u_small = np.asarray(exposure["velocity_small"], dtype=float)
+    u_large = np.asarray(exposure["velocity_large"], dtype=float)
+    du = np.abs(u_large - u_small)
+    at_rest = (u_small == 0.0) & (u_large == 0.0)
+    for i in np.flatnonzero(at_rest)[::-1]:
+        later = [j for j in range(i + 1, len(du)) if not at_rest[j] and np.isfinite(du[j])]
+        if later:
+            du[i] = du[later[0]]
+    c = np.asarray(exposure["exposure"], dtype=float)
     good = np.isfinite(du) & np.isfinite(c)
     cross = math.pi * (0.5 * (diameter_small + diameter_large)) ** 2
     rate = np.where(good, cross * np.nan_to_num(du) * c, 0.0)
-    expected = float(np.trapezoid(rate, t)) if hasattr(np, "trapezoid") else float(np.trapz(rate, t))
+    expected = _trapezoid(rate, t)
     efficiency = merges / expected if expected > 0 else math.nan
+    half = sorted(set(range(0, len(t), 2)) | {len(t) - 1})
+    coarse = _trapezoid(rate[half], t[half]) if len(t) > 2 else math.nan
+    quadrature = abs(merges / coarse - efficiency) if coarse > 0 else math.nan
     weights = c[good]
     mean_du = float(np.average(du[good], weights=weights)) if weights.sum() > 0 else math.nan
     du_error = float(np.std(du[good], ddof=1) / math.sqrt(good.sum())) if good.sum() > 1 else math.nan
     relative = math.sqrt((1.0 / merges if merges > 0 else math.inf) + (du_error / mean_du) ** 2)
-    return {"efficiency": efficiency, "standard_error": efficiency * relative, "expected_collisions": expected,
-            "merges": int(merges), "velocity_difference": mean_du}
+    statistical = efficiency * relative
+    return {"efficiency": efficiency, "standard_error": math.hypot(statistical, np.nan_to_num(quadrature)),
+            "quadrature_error": quadrature, "expected_collisions": expected, "merges": int(merges),
+            "velocity_difference": mean_du}
+
+
+def _trapezoid(y, x) -> float:
+    return float(np.trapezoid(y, x)) if hasattr(np, "trapezoid") else float(np.trapz(y, x))
 
 
 def _bin_of(diameter: float, edges: np.ndarray) -> tuple[float, float]:
@@ -144,13 +168,20 @@ def _bin_of(diameter: float, edges: np.ndarray) -> tuple[float, float]:
     return float(bounds[b]), float(bounds[b + 1])
 
 
-def kernel_run_efficiency(run_folder, diameter_small: float = 0.5e-3, diameter_large: float = 1.0e-3,
-                          slice_height: float | None = None) -> dict:
-    """The collision efficiency of a kernel run (two sizes settling without feed; the reference set's 'kernel'):
-    the merges between the bins of the two fed sizes (``merges_by_size.csv``) over the gravitational collisions of
-    :func:`collision_efficiency`, with the exposure and velocities from every droplet snapshot of the run folder
-    (each size counted within its merges-by-size bin; slices of one cell height unless ``slice_height`` [m]).
-    Returns the result of :func:`collision_efficiency` plus "bins" and "snapshots"."""
+#: The kernel run's exposure over every droplet snapshot of its run folder, stored beside the reference (the
+#: reference keeps a few snapshots only; E needs them all): time [s], exposure [1/m^3], velocity_small and
+#: velocity_large [m/s], and the run's merges of the pair in the units line's header.
+EXPOSURE_FILE = "kernel_exposure.csv"
+EXPOSURE_UNITS = {"time": ("s", "snapshot time"), "exposure": ("1/m^3", "sum over slices of N_s N_l / V_slice"),
+                  "velocity_small": ("m/s", "mean settling velocity of the small size"),
+                  "velocity_large": ("m/s", "mean settling velocity of the large size")}
+
+
+def kernel_exposure(run_folder, diameter_small: float = 0.5e-3, diameter_large: float = 1.0e-3,
+                    slice_height: float | None = None) -> tuple[pd.DataFrame, int, dict]:
+    """(the :func:`pair_exposure` table over every droplet snapshot of a kernel run folder, the merges between the
+    merges-by-size bins of the two fed sizes, {"small": bin, "large": bin} [m]); slices of one cell height unless
+    ``slice_height`` [m]."""
     from fulldem.submodels.coalescence import SIZE_BINS
 
     from .figures import read_droplets
@@ -163,12 +194,48 @@ def kernel_run_efficiency(run_folder, diameter_small: float = 0.5e-3, diameter_l
     small, large = _bin_of(diameter_small, SIZE_BINS), _bin_of(diameter_large, SIZE_BINS)
     table = run.merges_by_size
     pair = table[np.isclose(table["small_low"], small[0]) & np.isclose(table["large_low"], large[0])]
-    merges = int(pair["merges"].sum())
     snapshots = [read_droplets(run_folder, float(t)) for t in run.snapshot_times()]
     exposure = pair_exposure(snapshots, small, large, case.geometry.width * case.geometry.depth,
                              slice_height or case.fulldem.cell_size)
+    frame = pd.DataFrame({"time": exposure["times"], "exposure": exposure["exposure"],
+                          "velocity_small": exposure["velocity_small"], "velocity_large": exposure["velocity_large"]})
+    return frame, int(pair["merges"].sum()), {"small": small, "large": large}
+
+
+def write_kernel_exposure(run_folder, dest, diameter_small: float = 0.5e-3, diameter_large: float = 1.0e-3) -> Path:
+    """Write :data:`EXPOSURE_FILE` of the kernel run folder ``run_folder`` into the folder ``dest`` (atomically)."""
+    from settler.output import atomic_write_text, units_line
+
+    frame, merges, bins = kernel_exposure(run_folder, diameter_small, diameter_large)
+    header = (units_line(EXPOSURE_UNITS) + f"# merges: {merges} between ({bins['small'][0]:.9g}, {bins['small'][1]:.9g}] "
+              f"and ({bins['large'][0]:.9g}, {bins['large'][1]:.9g}] m; sizes {diameter_small:g} and "
+              f"{diameter_large:g} m\n")
+    path = Path(dest) / EXPOSURE_FILE
+    atomic_write_text(path, header + frame.to_csv(index=False, float_format="%.9g"))
+    return path
+
+
+def kernel_run_efficiency(run_folder, diameter_small: float = 0.5e-3, diameter_large: float = 1.0e-3,
+                          slice_height: float | None = None) -> dict:
+    """The collision efficiency of a kernel run (two sizes settling without feed; the reference set's 'kernel'):
+    the merges between the bins of the two fed sizes (``merges_by_size.csv``) over the gravitational collisions of
+    :func:`collision_efficiency`, with the exposure and velocities from every droplet snapshot of the run folder,
+    or from its :data:`EXPOSURE_FILE` where the folder is a stored reference (each size counted within its
+    merges-by-size bin; slices of one cell height unless ``slice_height`` [m]).
+    Returns the result of :func:`collision_efficiency` plus "bins" and "snapshots"."""
+    stored = Path(run_folder) / EXPOSURE_FILE
+    if stored.is_file() and slice_height is None:
+        frame = pd.read_csv(stored, comment="#")
+        head = [line for line in stored.read_text().splitlines()[:3] if line.startswith("# merges:")]
+        numbers = re.findall(r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?", head[0].split(":", 1)[1])
+        merges = int(numbers[0])
+        bins = {"small": (float(numbers[1]), float(numbers[2])), "large": (float(numbers[3]), float(numbers[4]))}
+    else:
+        frame, merges, bins = kernel_exposure(run_folder, diameter_small, diameter_large, slice_height)
+    exposure = {"times": frame["time"].to_numpy(), "exposure": frame["exposure"].to_numpy(),
+                "velocity_small": frame["velocity_small"].to_numpy(), "velocity_large": frame["velocity_large"].to_numpy()}
     result = collision_efficiency(merges, exposure, diameter_small, diameter_large)
-    result.update(bins={"small": small, "large": large}, snapshots=len(snapshots))
+    result.update(bins=bins, snapshots=len(frame))
     return result
 
 
@@ -233,6 +300,11 @@ def report(root="data/reference") -> str:
                          f"2 x the median age {rim['median_age']:.1f} s: share {rim['share']:.3f}")
         a, b = density_line(frame)
         lines.append(f"deep density line at t = {t:g} s: {a:.0f} + {b:.0f} z kg/m^3 (z in m above the bottom)")
+    if "kernel" in runs:
+        e = kernel_run_efficiency(root / "kernel")
+        lines.append(f"kernel collision efficiency E = {e['efficiency']:.3f} +- {e['standard_error']:.3f} ({e['merges']} "
+                     f"merges against {e['expected_collisions']:.0f} gravitational collisions over {e['snapshots']} "
+                     f"snapshots; quadrature error {e['quadrature_error']:.3f})")
     for coarse, fine in (("deep", "deep_fine"), ("demo", "demo_cell_33"), ("demo", "demo_cell_25")):
         if coarse in runs and fine in runs:
             end = min(summaries[fine]["end_time"], summaries[coarse]["end_time"])

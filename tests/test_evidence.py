@@ -60,3 +60,21 @@ def test_collision_efficiency_of_a_uniform_suspension():
     assert result["expected_collisions"] == pytest.approx(expected, rel=1e-12)
     assert result["efficiency"] == pytest.approx(0.5, abs=1.0 / expected)
     assert result["standard_error"] == pytest.approx(0.5 / math.sqrt(round(0.5 * expected)), rel=0.01)
+
+
+def test_collision_efficiency_counts_droplets_placed_at_rest_at_their_terminal_velocity():
+    """The initial snapshot (every droplet at rest) takes the next snapshot's velocity difference: droplets reach
+    terminal velocity in ~1 ms, so the first interval must count its full collisions (uniform suspension, where
+    the expected count is analytic); a constant rate has no quadrature error."""
+    ds, dl, us, ul = 0.5e-3, 1.0e-3, 0.6e-3, 2.5e-3
+    area, height, ns, nl = 0.01, 0.08, 300, 200
+    snapshots = []
+    for time in np.arange(0.0, 10.01, 0.5):
+        u_small, u_large = (0.0, 0.0) if time == 0.0 else (us, ul)
+        snapshots.append((time, pd.DataFrame({"z": np.full(ns + nl, 0.04), "diameter": [ds] * ns + [dl] * nl,
+                                              "settling_velocity": [u_small] * ns + [u_large] * nl})))
+    exposure = pair_exposure(snapshots, (0.4e-3, 0.6e-3), (0.9e-3, 1.1e-3), area, height)
+    expected = math.pi * (0.75e-3) ** 2 * (ul - us) * ns * nl / (area * height) * 10.0
+    result = collision_efficiency(100, exposure, ds, dl)
+    assert result["expected_collisions"] == pytest.approx(expected, rel=1e-12)
+    assert result["quadrature_error"] == pytest.approx(0.0, abs=1e-9)
