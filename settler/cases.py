@@ -455,6 +455,10 @@ NO_CALIBRATION = "none"
 PROVENANCE_TABLE = "provenance"
 
 
+#: Files of data/calibration/ that are not layers: the pre-registered hold-outs of the calibration.
+CALIBRATION_REGISTRIES = ("holdouts",)
+
+
 def calibration_path(name: str) -> Path:
     """Path of the calibration layer ``name`` (data/calibration/<name>.toml)."""
     return DATA_DIR / "calibration" / f"{name}.toml"
@@ -463,10 +467,12 @@ def calibration_path(name: str) -> Path:
 def read_calibration(name) -> dict:
     """The case sections of calibration layer ``name`` (its [provenance] table left out); CaseError if absent."""
     folder = DATA_DIR / "calibration"
-    if not isinstance(name, str) or not calibration_path(name).is_file():
-        available = ", ".join(sorted(p.stem for p in folder.glob("*.toml"))) or "none"
-        raise CaseError(f"case.calibration = {name!r}: no calibration layer {folder / f'{name}.toml'}; "
-                        f"available: {available}")
+    if not isinstance(name, str) or not calibration_path(name).is_file() or name in CALIBRATION_REGISTRIES:
+        available = ", ".join(sorted(p.stem for p in folder.glob("*.toml") if p.stem not in CALIBRATION_REGISTRIES))
+        available = available or "none"
+        what = "is the calibration's hold-out registry, not a layer" if name in CALIBRATION_REGISTRIES else \
+            f"no calibration layer {folder / f'{name}.toml'}"
+        raise CaseError(f"case.calibration = {name!r}: {what}; available: {available}")
     layer = _read_toml(calibration_path(name), "calibration layer")
     layer.pop(PROVENANCE_TABLE, None)
     return layer
