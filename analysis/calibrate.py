@@ -52,6 +52,8 @@ from settler.cases import CaseError, load_case
 from settler.output import OutputError, atomic_write_text, prepare_output_folder, read_time_series, source_commit, \
     to_json
 
+from .calibration.uncertainty import PARAMETERS, parameter_uncertainty  # noqa: F401 (re-exported)
+
 #: Columns compared: name -> (unit, how it is computed from the shared time series).
 COLUMNS: dict[str, tuple[str, str]] = {
     "droplet_count": ("-", "droplets in the slag"),
@@ -64,20 +66,6 @@ COLUMNS: dict[str, tuple[str, str]] = {
 TARGET_COLUMNS = ("droplet_count", "mean_diameter", "settled_fraction", "channel_velocity")
 TARGETS = {"fitted": 0.10, "holdout": 0.20}
 
-#: Fittable [popbal] keys: name -> (lower bound, upper bound, unit). Bounds: physical (>= 0, a fraction <= 1) and
-#: wide enough that an estimate on a bound says the data push beyond what the form allows; the channel must fit in
-#: the 0.2 m boxes (R_c < 0.113 m = 1.5 inlet radii of the simple and cubic cases).
-PARAMETERS: dict[str, tuple[float, float, str]] = {
-    "collision_efficiency": (1e-3, 100.0, "-"),
-    "channel_coefficient": (1e-3, 3.0, "-"),
-    "channel_feed_fraction": (0.0, 1.0, "-"),
-    "channel_radius_factor": (0.05, 1.45, "-"),
-    "shear_coefficient": (0.0, 100.0, "-"),
-    "feed_layer_thickness": (1e-3, 0.05, "m"),
-    "feed_layer_coefficient": (1e-5, 10.0, "-"),
-    "axis_velocity_ratio": (0.2, 5.0, "-"),
-    "plume_reynolds_scale": (1e-2, 100.0, "-"),
-}
 #: Bounds that replace PARAMETERS' under a channel_radius_form (fixed with --fix popbal.channel_radius_form=...):
 #: the 'flux' form's factor is phi_p^(-1/2) of a plume volume fraction phi_p in 0.0025 ... 4.
 FORM_BOUNDS = {"flux": {"channel_radius_factor": (0.5, 20.0)}}
@@ -380,31 +368,6 @@ def calibrate(cases=("simple",), holdout: str | None = "deep", parameters=DEFAUL
         fixed=dict(fixed or {}))
 
 
-def parameter_uncertainty(jacobian, residual, x, parameters):
-    """Standard errors [parameter units], correlation matrix, singular values of J diag(x) and the direction of the
-    smallest one, from the Jacobian J (m, p) of residuals r (m,) at the estimates x (p,).
-
-    cov = s^2 (J^T J)^+ with s^2 = r.r / (m - p) (the pseudo-inverse, so a rank-deficient J gives huge, not
-    missing, errors; a parameter the residuals do not move at all gets an infinite standard error).
-    """
-    jacobian = np.asarray(jacobian, dtype=float)
-    m, p = jacobian.shape
-    s2 = float(residual @ residual) / max(m - p, 1)
-    _, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
-    tiny = singular.max() * 1e-12 if singular.size and singular.max() > 0 else 0.0
-    inverse = (vt.T / np.where(singular > tiny, singular**2, np.inf)) @ vt
-    variance = s2 * np.diag(inverse)
-    dead = np.all(jacobian == 0.0, axis=0)
-    standard_errors = np.where(dead, np.inf, np.sqrt(np.maximum(variance, 0.0)))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.sqrt(np.diag(inverse))
-        correlation = inverse / np.outer(scale, scale)
-    correlation[np.ix_(dead, dead)] = np.nan
-    _, rel_singular, rel_vt = np.linalg.svd(jacobian * np.asarray(x, dtype=float)[None, :], full_matrices=False)
-    weakest = dict(zip(parameters, rel_vt[-1] * np.sign(rel_vt[-1][np.argmax(np.abs(rel_vt[-1]))])))
-    return standard_errors, correlation, rel_singular, weakest
-
-
 def flag_undetermined(parameters, x, low, high, standard_errors, correlation, singular) -> dict[str, str]:
     """Parameters the data do not determine, with the reason: on a bound, relative standard error above
     RELATIVE_ERROR_LIMIT, |correlation| above CORRELATION_LIMIT with another, or (for all) a singular value below
@@ -430,20 +393,10 @@ def flag_undetermined(parameters, x, low, high, standard_errors, correlation, si
 
 
 def _progress(total, enabled):
-    """A tqdm bar over model evaluations (at most ``total``), or a stand-in that does nothing."""
-    if enabled:
-        from tqdm import tqdm
+    """A tqdm bar over model evaluations (at most ``total``); silent unless ``enabled``."""
+    from tqdm import tqdm
 
-        return tqdm(total=total, desc="calibrate: model runs", unit="run", file=sys.stderr)
-
-    class _Quiet:
-        def update(self, n):
-            pass
-
-        def close(self):
-            pass
-
-    return _Quiet()
+    return tqdm(total=total, desc="calibrate: model runs", unit="run", file=sys.stderr, disable=not enabled)
 
 
 # ---------------------------------------------------------------------------------------------------------- layer
@@ -583,6 +536,10 @@ def _windows(items) -> dict:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``settler calibrate``."""
+    parser.add_argument("--set", default=None, metavar="REGISTRY",
+                        help="the hierarchical calibration over a registry of levels and pre-registered hold-outs "
+                             "(data/calibration/holdouts.toml); then only --write, --out, --overwrite, "
+                             "--reference-dir, --max-evaluations and --quiet apply (analysis.calibration)")
     parser.add_argument("--cases", default="simple",
                         help="comma-separated reference cases (folders of --reference-dir) to fit; default simple "
                              "(add cubic once data/reference/cubic exists)")
@@ -622,6 +579,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args) -> int:
     """Run ``settler calibrate``; returns the exit status (2 for refused input, via OutputError/CaseError)."""
     from settler.cases import parse_override
+
+    if args.set:
+        from analysis.calibration.command import run_set
+
+        return run_set(args)
 
     if not (args.block > 0 and math.isfinite(args.block)):
         raise OutputError(f"--block {args.block!r}: allowed a finite number of seconds > 0")

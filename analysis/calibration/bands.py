@@ -1,0 +1,98 @@
+"""Prediction bands: the calibration's uncertainty carried through popbal (SI units).
+
+A band is the spread of popbal's output over parameter samples drawn from the calibration's estimates and
+covariance (a Laplace approximation of the posterior: a multivariate normal per level, the levels independent,
+as each was fitted with the levels before it held), each sample's output multiplied by (1 + delta z) with z a
+standard normal per column and delta the fit's relative model discrepancy (what the model gets wrong whatever its
+parameters). Quantiles :data:`QUANTILES` (5 %, 50 %, 95 %) give the 90 % band.
+
+:func:`covariance_from_layer` reads a layer written by ``settler calibrate --set`` (its [provenance] tables);
+:func:`parameter_samples` draws; :func:`band` runs a model over the samples; :func:`coverage` is the check the
+issue asks for: the share of held-out window means inside their 90 % band (about 0.9 if the bands are honest).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from .uncertainty import PARAMETERS
+
+QUANTILES = (0.05, 0.5, 0.95)
+
+
+def covariance_from_layer(path) -> tuple[dict[str, float], np.ndarray, list[str], float]:
+    """(estimates {key: value}, covariance (p, p), keys in its order, the largest level discrepancy delta [-]) of
+    a hierarchical calibration layer: the collision level's E with its standard error, each fitted level's
+    estimates, standard errors and correlations (block-diagonal between levels)."""
+    layer = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    provenance = layer.get("provenance", {})
+    collision = provenance.get("collision")
+    if collision is None:
+        raise ValueError(f"{path}: no [provenance.collision]; a band needs a layer of 'settler calibrate --set'")
+    keys = ["collision_efficiency"]
+    estimates = {"collision_efficiency": float(collision["efficiency"])}
+    blocks = [np.array([[float(collision["standard_error"]) ** 2]])]
+    delta = 0.0
+    for level in ("transport", "whole"):
+        table = provenance.get(level)
+        if table is None:
+            continue
+        names = [k for k in table if k in PARAMETERS and isinstance(table[k], list)]
+        se = np.array([float(table[n][1]) for n in names])
+        corr = np.array([[float(v) for v in table[f"correlation_{n}"]] for n in names])
+        blocks.append(corr * np.outer(se, se))
+        for n in names:
+            keys.append(n)
+            estimates[n] = float(table[n][0])
+        delta = max(delta, float(table.get("discrepancy", 0.0)))
+    size = sum(b.shape[0] for b in blocks)
+    covariance = np.zeros((size, size))
+    at = 0
+    for b in blocks:
+        covariance[at:at + b.shape[0], at:at + b.shape[0]] = b
+        at += b.shape[0]
+    return estimates, covariance, keys, delta
+
+
+def parameter_samples(estimates: dict, covariance, keys, count: int, seed: int = 0) -> list[dict[str, float]]:
+    """``count`` draws of {key: value} from N(estimates, covariance), each value clipped into its key's bounds
+    (:data:`analysis.calibrate.PARAMETERS`)."""
+    rng = np.random.default_rng(seed)
+    mean = np.array([estimates[k] for k in keys])
+    draws = rng.multivariate_normal(mean, np.asarray(covariance, dtype=float), size=count, method="eigh")
+    low = np.array([PARAMETERS[k][0] for k in keys])
+    high = np.array([PARAMETERS[k][1] for k in keys])
+    return [dict(zip(keys, np.clip(row, low, high))) for row in draws]
+
+
+def band(model, samples, delta: float = 0.0, seed: int = 0, quantiles=QUANTILES) -> dict[str, np.ndarray]:
+    """{column: array (len(quantiles), ...)} of ``model(values) -> {column: value or array}`` over the parameter
+    ``samples``, each output times (1 + delta z), z ~ N(0, 1) per sample and column."""
+    rng = np.random.default_rng(seed + 1)
+    outputs: dict[str, list] = {}
+    for values in samples:
+        result = model(values)
+        for column, value in result.items():
+            outputs.setdefault(column, []).append(np.asarray(value, dtype=float) * (1.0 + delta * rng.normal()))
+    return {c: np.nanquantile(np.stack(v), quantiles, axis=0) for c, v in outputs.items()}
+
+
+def coverage(bands: dict[str, dict[str, np.ndarray]], observed: dict[str, dict[str, float]]) -> dict:
+    """The share of observed values inside their band (first to last quantile): ``bands`` {run: {column: (q,)}},
+    ``observed`` {run: {column: value}}. Returns {"inside", "total", "share", "outside": [(run, column)]}."""
+    inside, total, outside = 0, 0, []
+    for run, columns in observed.items():
+        for column, value in columns.items():
+            if run not in bands or column not in bands[run] or not math.isfinite(value):
+                continue
+            q = bands[run][column]
+            total += 1
+            if q[0] <= value <= q[-1]:
+                inside += 1
+            else:
+                outside.append((run, column))
+    return {"inside": inside, "total": total, "share": inside / total if total else math.nan, "outside": outside}

@@ -1,0 +1,37 @@
+"""``settler calibrate --set REGISTRY``: the hierarchical calibration from the command line (see
+:mod:`analysis.calibration.hierarchy`). Prints the summary; ``--out DIR`` writes ``hierarchy.json`` and
+``summary.txt`` there, ``--write TOML`` the calibration layer."""
+
+from __future__ import annotations
+
+from settler.output import OutputError, atomic_write_text, prepare_output_folder, to_json
+
+from .hierarchy import calibrate_set
+from .layer import write_layer
+from .registry import RegistryError, load_registry
+
+
+def run_set(args) -> int:
+    """Run the hierarchy for parsed ``settler calibrate`` arguments; exit status 0 (2 via OutputError)."""
+    if args.max_evaluations < 1:
+        raise OutputError(f"--max-evaluations {args.max_evaluations!r}: allowed an integer >= 1")
+    out = prepare_output_folder(args.out, overwrite=args.overwrite) if args.out else None
+    try:
+        registry = load_registry(args.set)
+        result = calibrate_set(registry, args.reference_dir, max_evaluations=args.max_evaluations,
+                               progress=not args.quiet)
+    except (RegistryError, FileNotFoundError) as exc:
+        raise OutputError(str(exc)) from None
+    text = result.summary()
+    print(text)
+    if out is not None:
+        data = {"collision": result.collision, "values": result.values, "radius_factor": result.radius_factor,
+                "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,
+                "levels": [{k: v for k, v in fit.__dict__.items()} for fit in result.levels]}
+        atomic_write_text(out / "hierarchy.json", to_json(data))
+        atomic_write_text(out / "summary.txt", text + "\n")
+        print(f"calibrate: wrote {out}/hierarchy.json, summary.txt")
+    if args.write:
+        path = write_layer(result, args.write, args.set, getattr(args, "command_line", ""))
+        print(f"calibrate: wrote the calibration layer {path}")
+    return 0

@@ -1,0 +1,169 @@
+"""The hierarchical calibration of popbal against the reference set, level by level (SI units).
+
+``settler calibrate --set data/calibration/holdouts.toml [--write data/calibration/designed.toml] [--out DIR]``
+
+1. **collision** -- popbal's collision_efficiency E from the kernel run alone: its merges of the two fed sizes
+   over the gravitational collisions pi (a_i + a_j)^2 abs(dU) n_i n_j V (:mod:`analysis.kernel_run`); no fit, the
+   standard error from the merge count, the velocity scatter and the time quadrature. Shear collisions are not in
+   that run: popbal's shear kernel is scaled by E x shear_coefficient, and shear_coefficient is left to level 3.
+2. **transport** -- with coalescence off in both engines (the registry's transport runs), the plume closures:
+   :data:`LEVEL_PARAMETERS` ["transport"], with the flux form's radius factor k_R = phi_p^(-1/2) taken from the
+   zone diagnostics (the plume core's volume fraction phi_p at mid-height, ``zone_profile.csv``), not fitted.
+3. **whole** -- what is left, :data:`LEVEL_PARAMETERS` ["whole"], from the whole runs, with levels 1 and 2 held.
+
+Each level is a :func:`analysis.calibration.fit.fit_level` (residuals from the runs' own scatter, a discrepancy
+term if the residuals call for one, the identifiability gate). The pre-registered hold-outs
+(:mod:`analysis.calibration.registry`) are refused as fitted runs, and are scored only when every level's gate has
+passed; otherwise the result says so and scores nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .fit import LevelFit, fit_level
+from .registry import Registry, refuse_holdouts
+from .targets import TARGET_COLUMNS, load_target, seed_scatter
+
+#: What each fitted level fits ([popbal] keys) and from where it starts.
+LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "plume_reynolds_scale"), "whole": ("shear_coefficient",)}
+START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "shear_coefficient": 1.0}
+#: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
+FORM = {"popbal.channel_radius_form": "flux"}
+#: The issue's targets: relative error of a window mean, fitted runs and hold-outs.
+TARGETS = {"fitted": 0.10, "holdout": 0.20}
+#: Height band [-, of the column height] over which the core volume fraction is averaged for k_R.
+CORE_BAND = (0.3, 0.7)
+
+
+@dataclass
+class Hierarchy:
+    """The result of :func:`calibrate_set`: the collision level, the fitted levels, the values every level
+    determined ({[popbal] key: (value, standard error)}), the hold-outs' errors (None when the gate failed)."""
+
+    collision: dict
+    levels: list[LevelFit]
+    values: dict[str, tuple[float, float]]
+    radius_factor: dict
+    holdout_errors: dict | None
+    gate_passed: bool
+    missing: dict[str, list[str]] = field(default_factory=dict)  # level -> registered runs not stored yet
+
+    def summary(self) -> str:
+        c = self.collision
+        lines = [f"level collision: E = {c['efficiency']:.3f} +- {c['standard_error']:.3f} from the kernel run "
+                 f"({c['merges']} merges against {c['expected_collisions']:.0f} gravitational collisions)",
+                 f"flux form radius factor from the zone diagnostics: k_R = {self.radius_factor['value']:.2f} "
+                 f"(core volume fraction {self.radius_factor['core_fraction']:.4f} in {', '.join(self.radius_factor['runs'])})"]
+        for fit in self.levels:
+            lines.append(f"level {fit.level}: runs {', '.join(fit.runs)}; chi2 {fit.chi2:.3g} for {fit.residual_count} "
+                         f"residuals, discrepancy {fit.discrepancy:.3g}, {fit.evaluations} model runs ({fit.status})")
+            for i, name in enumerate(fit.parameters):
+                prof = fit.profiles.get(name, {})
+                interval = f"[{_fmt(prof.get('lower'))}, {_fmt(prof.get('upper'))}]" if prof else "(no profile)"
+                lines.append(f"  {name:22s} {fit.estimates[name]:.4g} +- {fit.standard_errors[name]:.3g}; "
+                             f"profile 95 % {interval}")
+            if len(fit.parameters) > 1:
+                lines.append("  correlation " + np.array2string(fit.correlation, precision=3))
+            lines.append("  gate: " + ("passed" if fit.gate["passed"] else "FAILED: " + "; ".join(fit.gate["reasons"])))
+            lines += _error_rows(fit.errors, TARGETS["fitted"])
+        for level, runs in self.missing.items():
+            lines.append(f"level {level}: registered but not stored yet: {', '.join(runs)}")
+        if self.holdout_errors is None:
+            lines.append("hold-outs: not scored (the identifiability gate did not pass)")
+        else:
+            lines.append("hold-outs (pre-registered, scored once):")
+            lines += _error_rows(self.holdout_errors, TARGETS["holdout"])
+        return "\n".join(lines)
+
+
+def _fmt(value) -> str:
+    return "open" if value is None else f"{value:.4g}"
+
+
+def _error_rows(errors: dict, limit: float) -> list[str]:
+    rows = ["  " + f"{'run':22s}" + "".join(f"{c:>18s}" for c in TARGET_COLUMNS)]
+    for run, errs in errors.items():
+        rows.append("  " + f"{run:22s}" + "".join(
+            f"{errs[c]:+17.1%}" + (" " if abs(errs[c]) <= limit else "*") for c in TARGET_COLUMNS))
+    return rows + [f"  (* beyond {limit:.0%})"]
+
+
+def radius_factor_from_zones(runs, reference_dir: str | Path) -> dict:
+    """k_R = phi_p^(-1/2) [-] from the plume core's volume fraction phi_p (``zone_profile.csv``: the mean of
+    core_volume_fraction over the :data:`CORE_BAND` of the height and the runs' steady windows)."""
+    from analysis.runs import load_run
+
+    from .targets import window_of
+
+    fractions = []
+    for run in runs:
+        folder = Path(reference_dir) / run
+        profile = pd.read_csv(folder / "zone_profile.csv", comment="#")
+        (start, end), _ = window_of(load_run(folder).timeseries)
+        height = float(profile["z"].max() + profile["z"].min())  # cell centres: first + last = the height
+        band = profile[(profile["time"] > start) & (profile["z"] >= CORE_BAND[0] * height)
+                       & (profile["z"] <= CORE_BAND[1] * height)]
+        fractions.append(float(band["core_volume_fraction"].mean()))
+    phi = float(np.mean(fractions))
+    return {"value": phi ** -0.5, "core_fraction": phi, "runs": list(runs)}
+
+
+def _stored(runs, reference_dir) -> tuple[list[str], list[str]]:
+    root = Path(reference_dir)
+    have = [r for r in runs if (root / r / "timeseries.csv").is_file()]
+    return have, [r for r in runs if r not in have]
+
+
+def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
+                  profile: bool = True, progress: bool = True) -> Hierarchy:
+    """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds."""
+    from analysis.kernel_run import kernel_run_efficiency
+
+    seed = seed_scatter(reference_dir)
+    missing: dict[str, list[str]] = {}
+    collision_runs, missing["collision"] = _stored(registry.levels.get("collision", ()), reference_dir)
+    if not collision_runs:
+        raise FileNotFoundError(f"{reference_dir}: no kernel run stored; the collision level needs "
+                                f"{', '.join(registry.levels.get('collision', ('kernel',)))}")
+    refuse_holdouts(collision_runs, registry, "level collision")
+    collision = kernel_run_efficiency(Path(reference_dir) / collision_runs[0])
+    values = {"collision_efficiency": (collision["efficiency"], collision["standard_error"])}
+
+    transport_runs, missing["transport"] = _stored(registry.levels.get("transport", ()), reference_dir)
+    k_r = radius_factor_from_zones(transport_runs, reference_dir)
+    fixed = {**FORM, "popbal.channel_radius_factor": k_r["value"],
+             "popbal.collision_efficiency": collision["efficiency"]}
+    levels = []
+    for level in ("transport", "whole"):
+        runs, missing[level] = _stored(registry.levels.get(level, ()), reference_dir) if level == "whole" else \
+            (transport_runs, missing["transport"])
+        refuse_holdouts(runs, registry, f"level {level}")
+        targets = [load_target(r, reference_dir, seed) for r in runs]
+        case_files = {r: Path(reference_dir) / r / "case.toml" for r in runs}
+        parameters = LEVEL_PARAMETERS[level]
+        fit = fit_level(level, targets, case_files, parameters, {p: START[p] for p in parameters}, fixed,
+                        max_evaluations=max_evaluations, profile=profile, progress=progress)
+        levels.append(fit)
+        for name in parameters:
+            values[name] = (fit.estimates[name], fit.standard_errors[name])
+            fixed[f"popbal.{name}"] = fit.estimates[name]
+    gate_passed = all(f.gate["passed"] for f in levels) and collision["standard_error"] < 0.5 * collision["efficiency"]
+    holdout_errors = None
+    if gate_passed:
+        holdout_errors = {}
+        for run in _stored(registry.holdouts, reference_dir)[0]:
+            from .fit import reduced_means
+
+            target = load_target(run, reference_dir, seed)
+            means = reduced_means(target, Path(reference_dir) / run / "case.toml", {}, fixed)
+            holdout_errors[run] = {c: means[c] / target.means[c] - 1.0 for c in TARGET_COLUMNS}
+    return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
+                     holdout_errors=holdout_errors, gate_passed=gate_passed,
+                     missing={k: v for k, v in missing.items() if v})
+
+

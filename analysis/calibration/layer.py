@@ -1,0 +1,103 @@
+"""The hierarchical calibration as a calibration layer (``data/calibration/<name>.toml``): the [popbal] values every
+level determined, each with its source tag and standard error, and a [provenance] table with the command, the
+code commit, the registry, every level's fit (runs, chi^2, discrepancy, correlations, profile intervals, gate) and
+the hold-outs' errors, or why they were not scored. No machine paths: files are named relative to the repository.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+from pathlib import Path
+
+from settler.output import OutputError, atomic_write_text, source_commit
+
+from .hierarchy import FORM, Hierarchy
+
+
+def _q(text) -> str:
+    return '"' + str(text).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _portable(path) -> str:
+    """``path`` relative to the working folder when inside it, else its name alone (never a machine folder)."""
+    path = Path(path)
+    try:
+        return Path(os.path.relpath(path.resolve(), Path.cwd())).as_posix() if path.resolve().is_relative_to(
+            Path.cwd()) else path.name
+    except ValueError:
+        return path.name
+
+
+def _float(value) -> str:
+    return "nan" if value is None else repr(float(value))
+
+
+def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
+    """The layer's TOML text (module docstring)."""
+    commit = source_commit()
+    k_r = result.radius_factor
+    c = result.collision
+    lines = ["# popbal's closures from the hierarchical calibration against the reference set (settler calibrate --set;",
+             "# analysis/calibration). Level 1 the kernel run, level 2 the coalescence-off runs, level 3 the whole runs;",
+             "# the pre-registered hold-outs are scored only if every level passes the identifiability gate.",
+             f"# Gate {'PASSED' if result.gate_passed else 'FAILED'}"
+             + ("" if result.gate_passed else ": the values below are not to be used for predictions (no preset "
+                                                "applies this layer)") + ".", "", "[popbal]",
+             f"collision_efficiency = {c['efficiency']!r}  # - [derived] level collision: the kernel run's merges "
+             f"over its gravitational collisions, standard error {c['standard_error']:.3g}",
+             f"channel_radius_factor = {k_r['value']!r}  # - [derived] phi_p^(-1/2) of the plume core's volume "
+             f"fraction {k_r['core_fraction']:.4g} in the zone diagnostics of {', '.join(k_r['runs'])}"]
+    for fit in result.levels:
+        for name in fit.parameters:
+            lines.append(f"{name} = {fit.estimates[name]!r}  # - [derived] level {fit.level}: fit to "
+                         f"{', '.join(fit.runs)}, standard error {fit.standard_errors[name]:.3g}")
+    for key, value in FORM.items():
+        lines.append(f"{key.split('.', 1)[1]} = {_q(value)}  # [chosen] the closure form of every level")
+    lines += ["", "[provenance]", f"command = {_q(command or 'settler calibrate --set')}",
+              f"code_commit = {_q(commit['commit'])}", f"code_tree_dirty = {str(bool(commit['dirty'])).lower()}",
+              f"date = {_q(datetime.date.today().isoformat())}", f"registry = {_q(_portable(registry_path))}",
+              f"gate_passed = {str(result.gate_passed).lower()}"]
+    for level, runs in result.missing.items():
+        lines.append(f"not_stored_{level} = [{', '.join(_q(r) for r in runs)}]  # [derived] registered, not run yet")
+    lines += ["", "[provenance.collision]", f"efficiency = {c['efficiency']!r}  # - [derived]",
+              f"standard_error = {c['standard_error']!r}  # - [derived]",
+              f"quadrature_error = {c['quadrature_error']!r}  # - [derived] part of the standard error",
+              f"merges = {c['merges']}  # - [derived] of the two fed sizes' bins",
+              f"expected_collisions = {c['expected_collisions']!r}  # - [derived] at efficiency 1"]
+    for fit in result.levels:
+        lines += ["", f"[provenance.{fit.level}]", f"runs = [{', '.join(_q(r) for r in fit.runs)}]  # [derived] the level's fitted runs",
+                  f"chi2 = {fit.chi2!r}  # - [derived] for {fit.residual_count} residuals",
+                  f"discrepancy = {fit.discrepancy!r}  # - [derived] relative model discrepancy added to every sigma",
+                  f"model_runs = {fit.evaluations}  # - [derived]", f"status = {_q(fit.status)}",
+                  f"gate_passed = {str(fit.gate['passed']).lower()}",
+                  f"gate_reasons = [{', '.join(_q(r) for r in fit.gate['reasons'])}]  # [derived] empty: passed"]
+        for i, name in enumerate(fit.parameters):
+            prof = fit.profiles.get(name, {})
+            lines.append(f"{name} = [{fit.estimates[name]!r}, {fit.standard_errors[name]!r}, "
+                         f"{_float(prof.get('lower'))}, {_float(prof.get('upper'))}]  # - [derived] estimate, "
+                         "standard error, profile 95 % interval (nan: open)")
+            lines.append(f"correlation_{name} = [{', '.join(repr(round(float(v), 4)) for v in fit.correlation[i])}]"
+                         "  # - [derived] in the order of the level's parameters")
+        for run, errors in fit.errors.items():
+            lines.append(f"error_{run} = [{', '.join(_float(errors[k]) for k in errors)}]  # - [derived] "
+                         f"reduced / full - 1 of {', '.join(errors)}")
+    lines += ["", "[provenance.holdouts]"]
+    if result.holdout_errors is None:
+        lines.append("scored = false  # the gate did not pass: no hold-out was scored")
+    else:
+        lines.append("scored = true")
+        for run, errors in result.holdout_errors.items():
+            lines.append(f"error_{run} = [{', '.join(_float(errors[k]) for k in errors)}]  # - [derived] "
+                         f"reduced / full - 1 of {', '.join(errors)}")
+    return "\n".join(lines) + "\n"
+
+
+def write_layer(result: Hierarchy, path, registry_path, command: str = "") -> Path:
+    """Write :func:`layer_text` to ``path`` (a .toml file) atomically."""
+    path = Path(path)
+    if path.suffix != ".toml":
+        raise OutputError(f"--write {path}: allowed: a .toml file (e.g. data/calibration/designed.toml)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, layer_text(result, registry_path, command))
+    return path

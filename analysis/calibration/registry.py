@@ -1,0 +1,73 @@
+"""The pre-registered hold-outs, families and levels of popbal's calibration (``data/calibration/holdouts.toml``).
+
+A hold-out named there is never fitted, never used to choose a closure, and is scored once, after the
+identifiability gate has passed; :func:`refuse_holdouts` is the one check every fit goes through.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from settler.cases import DATA_DIR
+
+#: The registry shipped with the toolkit.
+REGISTRY = DATA_DIR / "calibration" / "holdouts.toml"
+LEVELS = ("collision", "transport", "whole")
+
+
+class RegistryError(ValueError):
+    """A registry that cannot be used, or a fit that would use a hold-out; the message names the file and key."""
+
+
+@dataclass(frozen=True)
+class Registry:
+    """holdouts: run names never fitted, with why; families: {family: runs} for leave-one-family-out; levels:
+    {level: runs} of the hierarchical fit (:data:`LEVELS`); path: the file read."""
+
+    holdouts: tuple[str, ...]
+    why: dict[str, str]
+    families: dict[str, tuple[str, ...]]
+    levels: dict[str, tuple[str, ...]]
+    path: Path
+
+
+def load_registry(path: str | Path = REGISTRY) -> Registry:
+    """Read and check a registry file (see ``data/calibration/holdouts.toml``)."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise RegistryError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise RegistryError(f"{path}: not valid TOML ({exc})") from None
+    holdouts = tuple(raw.get("holdouts", {}).get("runs", ()))
+    why = dict(raw.get("holdouts", {}).get("why", {}))
+    families = {k: tuple(v) for k, v in raw.get("families", {}).items()}
+    levels = {k: tuple(v) for k, v in raw.get("levels", {}).items()}
+    if not holdouts:
+        raise RegistryError(f"{path}: [holdouts] runs is empty; allowed: at least one run name")
+    unexplained = [h for h in holdouts if not why.get(h)]
+    if unexplained:
+        raise RegistryError(f"{path}: [holdouts.why] has no reason for {', '.join(unexplained)}; every hold-out "
+                            "states why it was chosen")
+    unknown = [k for k in levels if k not in LEVELS]
+    if unknown:
+        raise RegistryError(f"{path}: [levels] {', '.join(unknown)}: allowed levels {', '.join(LEVELS)}")
+    registry = Registry(holdouts=holdouts, why=why, families=families, levels=levels, path=path)
+    for where, names in [*(("[families] " + k, v) for k, v in families.items()),
+                         *(("[levels] " + k, v) for k, v in levels.items())]:
+        refuse_holdouts(names, registry, where)
+    return registry
+
+
+def refuse_holdouts(names, registry: Registry | None = None, where: str = "the fit") -> None:
+    """Raise :class:`RegistryError` if any of ``names`` is a pre-registered hold-out of ``registry`` (default: the
+    shipped one)."""
+    registry = registry or load_registry()
+    used = [n for n in names if n in registry.holdouts]
+    if used:
+        raise RegistryError(f"{where}: {', '.join(used)} is a pre-registered hold-out ({registry.path.name}: "
+                            f"{registry.why[used[0]].split(':')[0][:80]}...); allowed: runs not in "
+                            f"{', '.join(registry.holdouts)}")

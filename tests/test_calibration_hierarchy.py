@@ -1,0 +1,195 @@
+"""The hierarchical calibration's parts against independent references: the standard error of an autocorrelated
+window mean against Monte Carlo replicates, the fit and its gate against linear models whose answers are known
+(identifiable, and a product only), the discrepancy term against chi^2 = m - p, and the registry's refusals."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analysis.calibration.fit import fit_level
+from analysis.calibration.registry import RegistryError, load_registry, refuse_holdouts
+from analysis.calibration.targets import TARGET_COLUMNS, Target, effective_count, within_run_errors
+
+COLUMNS = tuple(TARGET_COLUMNS)
+
+
+def _ar1(rng, n, phi, scale):
+    x = np.empty(n)
+    x[0] = rng.normal(0.0, scale / math.sqrt(1.0 - phi**2))
+    for i in range(1, n):
+        x[i] = phi * x[i - 1] + rng.normal(0.0, scale)
+    return x
+
+
+def test_window_mean_error_of_an_autocorrelated_series_matches_its_replicates():
+    """An AR(1) series (phi = 0.6) of 80 one-second blocks: the mean over replicates of the estimated standard
+    error of the window mean lies within 15 % of the replicates' actual scatter of that mean (treating the blocks as
+    independent would underestimate it by sqrt((1 + phi) / (1 - phi)) = 2)."""
+    rng = np.random.default_rng(7)
+    n, phi = 80, 0.6
+    means, estimates = [], []
+    t = np.arange(1.0, n + 1.0)
+    for _ in range(300):
+        count = 1000.0 + _ar1(rng, n, phi, 10.0)
+        frame = pd.DataFrame({"time": t, "droplet_count": count, "mean_diameter": 1e-3 + 0.0 * t,
+                              "channel_velocity": 0.05 + 0.0 * t, "mass_settled": 1e-3 * t})
+        errors, counts = within_run_errors(frame, (0.0, float(n)))
+        means.append(count.mean())
+        estimates.append(errors["droplet_count"])
+    actual = float(np.std(means, ddof=1))
+    assert np.mean(estimates) == pytest.approx(actual, rel=0.15)
+    assert effective_count(80, 0.6) == pytest.approx(20.0)
+
+
+def _targets(model, truth, names, rng, relative=0.01):
+    out = []
+    for name in names:
+        exact = model(Target(name, (0, 1), True, {}, {}), None, truth, None)
+        se = {c: relative * abs(v) for c, v in exact.items()}
+        out.append(Target(name=name, window=(0.0, 1.0), steady=True,
+                          means={c: v + rng.normal(0.0, se[c]) for c, v in exact.items()}, standard_errors=se))
+    return out
+
+
+COVARIATES = {f"r{k}": (1.0 + k, 2.0 - 0.3 * k) for k in range(4)}
+
+
+def _linear(target, case_file, values, fixed):
+    x, y = COVARIATES[target.name]
+    a, b = values["channel_coefficient"], values["shear_coefficient"]
+    return {c: (a * x + b * y) * (1.0 + 0.1 * i) for i, c in enumerate(COLUMNS)}
+
+
+def test_fit_recovers_a_linear_models_parameters_and_its_profile_matches_the_standard_error():
+    truth = {"channel_coefficient": 0.4, "shear_coefficient": 1.5}
+    targets = _targets(_linear, truth, COVARIATES, np.random.default_rng(1))
+    fit = fit_level("whole", targets, {}, list(truth), {"channel_coefficient": 1.0, "shear_coefficient": 1.0},
+                    model=_linear, progress=False)
+    for name, value in truth.items():
+        se = fit.standard_errors[name]
+        assert abs(fit.estimates[name] - value) < 4.0 * se
+        # a linear model's chi^2 profile is a parabola: its 95 % interval is estimate +- 1.96 standard errors
+        prof = fit.profiles[name]
+        assert prof["upper"] - fit.estimates[name] == pytest.approx(1.96 * se, rel=0.1)
+        assert fit.estimates[name] - prof["lower"] == pytest.approx(1.96 * se, rel=0.1)
+    assert fit.discrepancy == 0.0
+    assert fit.gate["passed"], fit.gate
+
+
+def _product(target, case_file, values, fixed):
+    x, _ = COVARIATES[target.name]
+    a, b = values["channel_coefficient"], values["shear_coefficient"]
+    return {c: a * b * x * (1.0 + 0.1 * i) for i, c in enumerate(COLUMNS)}
+
+
+def test_gate_fails_when_the_data_determine_only_a_product():
+    truth = {"channel_coefficient": 0.4, "shear_coefficient": 1.5}
+    targets = _targets(_product, truth, COVARIATES, np.random.default_rng(2))
+    fit = fit_level("whole", targets, {}, list(truth), {"channel_coefficient": 1.0, "shear_coefficient": 1.0},
+                    model=_product, progress=False)
+    assert fit.estimates["channel_coefficient"] * fit.estimates["shear_coefficient"] == pytest.approx(0.6, rel=0.02)
+    assert not fit.gate["passed"]
+    assert any("correlation" in r for r in fit.gate["reasons"]), fit.gate
+
+
+def _biased(target, case_file, values, fixed):
+    """The linear model but 20 % off on one column whatever the parameters: a structural misfit."""
+    out = _linear(target, case_file, values, fixed)
+    out["settling_flux"] *= 1.2
+    return out
+
+
+def test_discrepancy_brings_chi2_to_its_degrees_of_freedom_when_the_model_misfits():
+    truth = {"channel_coefficient": 0.4, "shear_coefficient": 1.5}
+    targets = _targets(_linear, truth, COVARIATES, np.random.default_rng(3))
+    fit = fit_level("whole", targets, {}, list(truth), {"channel_coefficient": 1.0, "shear_coefficient": 1.0},
+                    model=_biased, progress=False, profile=False)
+    m, p = 4 * len(COLUMNS), 2
+    assert fit.discrepancy > 0.01
+    assert fit.chi2 == pytest.approx(m - p, rel=0.1)
+
+
+def test_registry_names_holdouts_that_no_fit_may_use(tmp_path):
+    registry = load_registry()
+    assert "deep" in registry.holdouts and all(registry.why[h] for h in registry.holdouts)
+    with pytest.raises(RegistryError, match="deep is a pre-registered hold-out"):
+        refuse_holdouts(["demo", "deep"], registry)
+    refuse_holdouts(["demo", "simple"], registry)  # fine
+    bad = tmp_path / "holdouts.toml"
+    bad.write_text('[holdouts]\nruns = ["deep"]\n[levels]\nwhole = ["demo", "deep"]\n[holdouts.why]\ndeep = "x"\n')
+    with pytest.raises(RegistryError, match=r"\[levels\] whole: deep"):
+        load_registry(bad)
+    bad.write_text('[holdouts]\nruns = ["deep"]\n')
+    with pytest.raises(RegistryError, match="no reason for deep"):
+        load_registry(bad)
+
+
+def _hierarchy(fit):
+    from analysis.calibration.hierarchy import Hierarchy
+
+    collision = {"efficiency": 3.3, "standard_error": 0.07, "quadrature_error": 0.006, "merges": 2542,
+                 "expected_collisions": 770.0}
+    return Hierarchy(collision=collision, levels=[fit], values={}, radius_factor={"value": 4.2, "core_fraction": 0.057,
+                                                                                  "runs": ["demo_no_coalescence"]},
+                     holdout_errors=None, gate_passed=False, missing={"whole": ["deep_w002"]})
+
+
+def test_layer_records_the_levels_without_machine_paths_and_bands_read_its_covariance(tmp_path, monkeypatch):
+    """The layer of a hierarchy: valid TOML whose numbers carry source tags, no machine folder, and the
+    covariance a band is drawn from: the collision level's variance and the fitted level's SE x corr x SE."""
+    import tomllib
+
+    from analysis.calibration.bands import covariance_from_layer
+    from analysis.calibration.layer import write_layer
+
+    truth = {"channel_coefficient": 0.4, "shear_coefficient": 1.5}
+    targets = _targets(_linear, truth, COVARIATES, np.random.default_rng(1))
+    fit = fit_level("whole", targets, {}, list(truth), {"channel_coefficient": 1.0, "shear_coefficient": 1.0},
+                    model=_linear, progress=False)
+    monkeypatch.chdir(tmp_path)
+    registry = tmp_path / "data" / "holdouts.toml"
+    path = write_layer(_hierarchy(fit), tmp_path / "layer.toml", registry, "settler calibrate --set x")
+    text = path.read_text()
+    assert str(tmp_path) not in text and "/work" not in text
+    layer = tomllib.loads(text)
+    assert layer["provenance"]["registry"] == "data/holdouts.toml" and layer["provenance"]["gate_passed"] is False
+    assert layer["popbal"]["shear_coefficient"] == pytest.approx(fit.estimates["shear_coefficient"])
+    estimates, covariance, keys, delta = covariance_from_layer(path)
+    assert keys == ["collision_efficiency", "channel_coefficient", "shear_coefficient"]
+    assert covariance[0, 0] == pytest.approx(0.07**2)
+    se = [fit.standard_errors[k] for k in keys[1:]]
+    assert covariance[1, 2] == pytest.approx(fit.correlation[0, 1] * se[0] * se[1], rel=1e-3)
+    assert covariance[0, 1] == 0.0 and delta == fit.discrepancy
+
+
+def test_band_of_a_linear_prediction_matches_its_analytic_spread_and_covers_ninety_percent():
+    """y = a x1 + b x2 with (a, b) ~ N(m, C): the 90 % band is y_mean +- 1.645 sqrt(g C g) (g = (x1, x2)); of
+    400 draws of y from that distribution, 90 % +- 4 % lie inside the band (binomial sd 1.5 %)."""
+    from analysis.calibration.bands import band, coverage, parameter_samples
+
+    mean = {"channel_coefficient": 0.4, "shear_coefficient": 1.5}
+    covariance = np.array([[0.01**2, -0.5 * 0.01 * 0.03], [-0.5 * 0.01 * 0.03, 0.03**2]])
+    keys = list(mean)
+    g = np.array([2.0, 1.0])
+    samples = parameter_samples(mean, covariance, keys, 4000, seed=3)
+    bands = band(lambda v: {"y": g[0] * v["channel_coefficient"] + g[1] * v["shear_coefficient"]}, samples)
+    centre, spread = g @ np.array([0.4, 1.5]), math.sqrt(g @ covariance @ g)
+    assert bands["y"][0] == pytest.approx(centre - 1.645 * spread, abs=0.05 * spread)
+    assert bands["y"][2] == pytest.approx(centre + 1.645 * spread, abs=0.05 * spread)
+    draws = np.random.default_rng(9).normal(centre, spread, 400)
+    result = coverage({f"r{i}": {"y": bands["y"]} for i in range(400)}, {f"r{i}": {"y": v} for i, v in enumerate(draws)})
+    assert result["share"] == pytest.approx(0.9, abs=0.04)
+
+
+def test_settler_calibrate_set_refuses_a_registry_that_fits_a_holdout(tmp_path):
+    import subprocess
+    import sys
+
+    bad = tmp_path / "holdouts.toml"
+    bad.write_text('[holdouts]\nruns = ["deep"]\n[holdouts.why]\ndeep = "x"\n[levels]\nwhole = ["deep"]\n')
+    done = subprocess.run([sys.executable, "-m", "settler", "calibrate", "--set", str(bad)], capture_output=True,
+                          text=True)
+    assert done.returncode == 2
+    assert "deep is a pre-registered hold-out" in done.stderr and "Traceback" not in done.stderr
