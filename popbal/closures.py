@@ -78,8 +78,21 @@ u_s itself (axis_velocity_ratio absent = 1). Re_c is a fitted constant; the simp
 feed and so their Re: fitted on those two alone, Re_c and c_ch are not separable, and only a fit including deep
 determines it (analysis.calibrate reports this).
 
-Not modelled (calibration will tell whether they matter): the return flow of slag in the outer zone and the
-exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel, and, in the
+Return flow (``return_flow_ratio`` r; the designed reference set, docs/guide/reduced-model.md). The slag the plume
+drives down comes back up outside it. In the full runs the mean upflow over the box at mid-height is a fixed share of
+the slag's axis velocity: 2.72, 3.70 and 4.92 mm/s at 0.5, 1 and 2 times the demo's feed against axis velocities of
+43.0, 60.4 and 84.0 mm/s (0.063, 0.061, 0.059), 0.057 and 0.063 at half and twice the viscosity, 0.060 in deep:
+the return flux grows as the plume's velocity (Q^0.43 over the feed family), not as its core's flux pi R_c^2 u_s
+(which grows as Q), because the plume drags slag well beyond its droplet-laden core (the confined Stokes plume's
+downflow reaches r ~ 0.46 R whatever the feed). In the narrower columns of deep's feed the share rises (0.11 at
+50 mm, 0.31 at 20 mm), as the return flow has less room: a confinement law r(R/a) is the next form to try. The
+closure: the outer zone's slag rises at u_up = r u_s (u_s the steady plume velocity), so a droplet there moves down
+at U_h(d) - u_up and rises when slower; what rises out of the outer zone's top re-enters the channel at the roof,
+and of what leaves the channel's bottom a share min(1, U_h(d) / u_up) settles (the droplet must cross the turning
+slag to reach the floor) and the rest enters the outer zone's bottom. Without it (r = 0) every droplet that reaches
+the channel's bottom settles, and popbal settles 2.7 times the coalescence-off demo's mass flux.
+
+Not modelled (calibration will tell whether they matter): the exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel, and, in the
 simple case's lower half, carries them out of the slag jet), the cloud's break-up, and inertia of the plume
 (Re > 1).
 """
@@ -148,3 +161,16 @@ def flux_channel_radius(volume_flux, velocity, radius_factor):
 def transport_factor(reynolds, reynolds_scale=None):
     """Droplet transport velocity / the plume's u_s [-]: 1 / (1 + Re / Re_c); 1 when Re_c is None."""
     return 1.0 / (1.0 + reynolds / reynolds_scale) if reynolds_scale else 1.0
+
+
+def return_velocity(ratio, plume_velocity):
+    """The outer zone's slag upflow u_up = r u_s [m/s] (r [-], u_s the steady plume velocity [m/s]); 0 when r is 0."""
+    return ratio * plume_velocity if ratio > 0.0 else 0.0
+
+
+def settling_share(settling_velocity, upflow):
+    """The share min(1, U / u_up) [-] of the droplets reaching the channel's bottom that settle, for their hindered
+    settling velocity U [m/s] against the return upflow u_up [m/s] (1 without upflow)."""
+    if upflow <= 0.0:
+        return np.ones_like(np.asarray(settling_velocity, dtype=float))
+    return np.clip(np.asarray(settling_velocity, dtype=float) / upflow, 0.0, 1.0)

@@ -38,8 +38,9 @@ from settler.output import (CHANNEL_PROFILE, MID_BAND, atomic_write_bytes, band_
                             write_channel_profile, write_run_metadata, write_time_series)
 
 from . import limits
+from .closures import settling_share
 from .kernels import (AGE, FES_REMOVED, NEGLIGIBLE_VOLUME_FRACTION, NUMBER, QUANTITIES, cell_properties,
-                      coalesce_zone, react_zone, transport_zone)
+                      coalesce_zone, react_zone, transport_two_way, transport_zone)
 from .model import CHANNEL, OUTER, ZONES, Model, setup
 
 #: Arrays of distribution.npz: name -> (unit, meaning). T outputs, Z = 2 zones, J cells, K sections.
@@ -157,6 +158,11 @@ class _Work:
         self.top_source = np.zeros((QUANTITIES, sections))
         self.bottom_out = np.zeros((QUANTITIES, sections))
         self.sink_out = np.zeros((QUANTITIES, sections))
+        # the return flow (model.return_velocity > 0): the channel's bottom outflow turning into the outer zone, what
+        # rises out of the outer zone's top, and the tridiagonal solver's rows
+        self.turned = np.zeros((QUANTITIES, sections))
+        self.top_out = np.zeros((QUANTITIES, sections))
+        self.rows = np.zeros((3, cells))
 
 
 def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
@@ -168,6 +174,8 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
                     model.cloud_coefficient if channel else work.no_cloud, model.cloud_radius if channel else
                     work.no_cloud, model.downflow, work.diameters[zone], work.densities[zone], work.velocities[zone],
                     work.volume_fraction[zone], work.collective[zone])
+    if not channel and model.return_velocity > 0.0:
+        work.velocities[zone] -= model.return_velocity  # the slag rises at u_up outside the plume
     if channel and model.channel_radius > 0.0:
         # G = shear_coefficient u / R with the cell's cloud scale (R_c in the plume, delta in the feed layer)
         work.shear[zone] = p["shear_coefficient"] * work.collective[zone] / model.cloud_radius
@@ -285,9 +293,16 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
             books.fed[NUMBER] += dt * rate
         work.bottom_out[:] = 0.0
         work.sink_out[:] = 0.0
-        transport_zone(content[zone], work.velocities[zone], model.sink_rate, work.top_source, dz, dt,
-                       work.bottom_out, work.sink_out)
-        books.settled += work.bottom_out * area
+        if model.return_velocity > 0.0 and zone == OUTER:
+            _return_zone(model, content, work, books, dt)
+        else:
+            transport_zone(content[zone], work.velocities[zone], model.sink_rate, work.top_source, dz, dt,
+                           work.bottom_out, work.sink_out)
+            if model.return_velocity > 0.0:  # the channel: a share settles, the rest turns into the return flow
+                share = settling_share(work.velocities[OUTER, 0] + model.return_velocity, model.return_velocity)
+                work.turned[:] = work.bottom_out * (1.0 - share)[None, :] * area
+                work.bottom_out *= share[None, :]
+            books.settled += work.bottom_out * area
         books.lost += work.sink_out * area
         if p["coalescence"]:
             most = max(most, coalesce_zone(
@@ -300,6 +315,19 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
                              model.x_final, model.time_constant, dt)
         books.reacted += removed * dz * area
     return most
+
+
+def _return_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, dt: float) -> None:
+    """Transport in the outer zone with the return flow: velocities of either sign, the channel's turned outflow
+    entering its bottom cell, and what rises out of its top put into the channel's top cell (popbal.closures)."""
+    area, dz = model.zone_area[OUTER], model.cell_height
+    work.top_out[:] = 0.0
+    bottom_source = work.turned / (area * dz * dt)  # the channel's turned outflow (its step ran first) [1/m^3/s]
+    transport_two_way(content[OUTER], work.velocities[OUTER], model.sink_rate, work.top_source, bottom_source, dz, dt,
+                      work.bottom_out, work.top_out, work.sink_out, work.rows[0], work.rows[1], work.rows[2])
+    books.settled += work.bottom_out * area
+    content[CHANNEL, -1] += work.top_out * area / (model.zone_area[CHANNEL] * dz)
+    work.turned[:] = 0.0
 
 
 def _seconds(name: str, value) -> float:
@@ -389,7 +417,7 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
         if t >= stop - tiny:
             break
         occupied = content[:, :, NUMBER, :] * grid.pivots >= NEGLIGIBLE_VOLUME_FRACTION
-        fastest = work.velocities[occupied].max() if occupied.any() else 0.0
+        fastest = np.abs(work.velocities[occupied]).max() if occupied.any() else 0.0
         dt = min(p["time_step"], outputs[next_output] - t)
         if fastest > 0.0:
             dt = min(dt, p["max_courant"] * dz / fastest)

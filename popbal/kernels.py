@@ -559,6 +559,51 @@ def transport_zone(content, face_velocity, sink_rate, top_source, dz, dt, bottom
             bottom_out[q, k] += inflow * dz
 
 
+@njit(cache=True)
+def transport_two_way(content, velocity, sink_rate, top_source, bottom_source, dz, dt, bottom_out, top_out,
+                      sink_out, diagonal, upper, rhs):
+    """Implicit (backward-Euler) first-order donor-cell transport in z of one zone over dt [s], for velocities of
+    either sign: the return-flow zone, where droplets slower than the slag's upflow rise.
+
+    content (J, Q, K), cell 0 at the bottom. velocity (J, K) [m/s, > 0 downwards]: the velocity of section k's
+    droplets in cell j; a cell passes v+ c / dz per second to the cell below (v > 0) or |v| c / dz to the cell above
+    (v < 0), so each row of the implicit system is (1 + |v_j| dt/dz + s_j dt) c_j - v+_{j+1} dt/dz c_{j+1}
+    - v-_{j-1} dt/dz c_{j-1} = c_j^old + sources dt: a diagonally dominant tridiagonal M-matrix, solved by the Thomas
+    algorithm (stable, positive, conservative). top_source, bottom_source (Q, K): sources into the top and bottom
+    cells [per m^3 per s]. bottom_out, top_out, sink_out (Q, K) accumulate what left through the bottom (downward
+    droplets of cell 0), the top (rising droplets of the top cell) and the sink during dt, per m^2 of the zone.
+    diagonal, upper, rhs (J,): work space. With every velocity >= 0 and no bottom source it gives
+    :func:`transport_zone`'s result (the same lower-triangular system).
+    """
+    n_j, n_q, n_k = content.shape
+    c = dt / dz
+    for k in range(n_k):
+        for q in range(n_q):
+            # build: lower_j = -c v-_{j-1}, diagonal_j, upper_j = -c v+_{j+1}; forward elimination
+            for j in range(n_j):
+                v = velocity[j, k]
+                diagonal[j] = 1.0 + c * abs(v) + dt * sink_rate[j]
+                upper[j] = -c * max(velocity[j + 1, k], 0.0) if j + 1 < n_j else 0.0
+                rhs[j] = content[j, q, k]
+            rhs[n_j - 1] += dt * top_source[q, k]
+            rhs[0] += dt * bottom_source[q, k]
+            for j in range(1, n_j):
+                lower = -c * max(-velocity[j - 1, k], 0.0)
+                if lower != 0.0:
+                    factor = lower / diagonal[j - 1]
+                    diagonal[j] -= factor * upper[j - 1]
+                    rhs[j] -= factor * rhs[j - 1]
+            new = rhs[n_j - 1] / diagonal[n_j - 1]
+            content[n_j - 1, q, k] = new
+            for j in range(n_j - 2, -1, -1):
+                new = (rhs[j] - upper[j] * content[j + 1, q, k]) / diagonal[j]
+                content[j, q, k] = new
+            for j in range(n_j):
+                sink_out[q, k] += dt * sink_rate[j] * content[j, q, k] * dz
+            bottom_out[q, k] += dt * max(velocity[0, k], 0.0) * content[0, q, k]
+            top_out[q, k] += dt * max(-velocity[n_j - 1, k], 0.0) * content[n_j - 1, q, k]
+
+
 # ---------------------------------------------------------------------------------------------------- reaction
 @njit(cache=True)
 def react_zone(content, pivots, original_diameters, reacting, x_initial, x_final, time_constant, dt):

@@ -48,6 +48,7 @@ class Model:
     while t < feed_end. downflow (J,) [m/s]: slag velocity at each cell's lower face; sink_rate (J,) [1/s]: slag
     withdrawal per unit volume. velocity_table (K, M) [m/s] single-droplet settling velocity over age, age_step [s].
     residence_time [s]: slag mass / slag feed rate (inf without slag feed). stop_time [s]: when the run ends.
+    return_velocity [m/s]: the outer zone's slag upflow u_up (0: no return flow; popbal.closures.return_velocity).
     cloud_coefficient [-] and cloud_radius [m] (J,): the channel zone's cloud law per cell, the plume's below the
     feed layer and the layer's in it (popbal.closures.cloud_profile).
     """
@@ -81,6 +82,7 @@ class Model:
     cloud_radius: np.ndarray
     gravity: float = STANDARD_GRAVITY
     parameters: dict = field(default_factory=dict)
+    return_velocity: float = 0.0
 
     @property
     def name(self) -> str:
@@ -217,6 +219,11 @@ def build(case: Case) -> Model:
         "max_rate_step": 0.5,
         "speed_limit": speed_limit,
     }
+    ratio = p.return_flow_ratio or 0.0
+    if ratio > 0.0 and (channel_area == 0.0 or zone_area[OUTER] <= 0.0):
+        raise CaseError(f"popbal.return_flow_ratio = {ratio!r}: needs a channel zone inside the box "
+                        "(popbal.channel_radius_factor > 0); allowed: 0 without one")
+    return_velocity = closures.return_velocity(ratio, plume_velocity)
     return Model(case=case, grid=grid, cells=cells, cell_height=dz, z=z, zone_area=zone_area,
                  channel_radius=channel_radius, inlet_radius=inlet_radius, feed_density=case.matte.density,
                  feed_number_rate=feed_number_rate,
@@ -225,7 +232,7 @@ def build(case: Case) -> Model:
                  velocity_table=table, age_step=tau / TABLE_PER_TAU, residence_time=residence, stop_time=stop_time,
                  horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
                  viscosity=case.slag_viscosity, cloud_coefficient=cloud_coefficient, cloud_radius=cloud_radius,
-                 parameters=parameters)
+                 parameters=parameters, return_velocity=return_velocity)
 
 
 def channel_closure(case: Case) -> tuple[float, float, float, float]:

@@ -243,6 +243,12 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                               "rho_s u_s R_c / mu the plume Reynolds number, while the channel_velocity "
                                               "output stays the slag's u_s (popbal.closures); absent: no such "
                                               "reduction.", 0.0, exclusive_minimum=True, optional=True),
+        "return_flow_ratio": Field(F, "-", "r: the slag the plume drives down comes back up through the outer zone "
+                                           "at u_up = r u_s (u_s the steady plume velocity), where droplets slower than u_up rise "
+                                           "to the roof and re-enter the channel, and of the droplets reaching the "
+                                           "channel's bottom a share min(1, U / u_up) settles (U their hindered "
+                                           "settling velocity), the rest turning into the return flow "
+                                           "(popbal.closures); absent or 0: no return flow.", 0.0, optional=True),
     },
 }
 del F, I, B, S, L

@@ -193,3 +193,35 @@ def test_settler_calibrate_set_refuses_a_registry_that_fits_a_holdout(tmp_path):
                           text=True)
     assert done.returncode == 2
     assert "deep is a pre-registered hold-out" in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.slow
+def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command(tmp_path):
+    """The committed hierarchical layer (data/calibration/designed.toml) comes back from the command in its
+    [provenance], run from the repository root: the same [popbal] values to 1e-9 (popbal and the fit are
+    deterministic), and a provenance that names no machine folder. About 40 minutes on two cores."""
+    import shlex
+    import subprocess
+    import sys
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    stored_path = root / "data" / "calibration" / "designed.toml"
+    if not stored_path.is_file():
+        pytest.skip("no data/calibration/designed.toml committed")
+    stored = tomllib.loads(stored_path.read_text())
+    command = shlex.split(stored["provenance"]["command"])
+    assert command[:2] == ["settler", "calibrate"] and "/work" not in stored["provenance"]["command"]
+    layer = tmp_path / "again.toml"
+    args = [a for a in command[2:]]
+    for option in ("--write", "--out"):
+        if option in args:
+            i = args.index(option)
+            del args[i:i + 2]
+    done = subprocess.run([sys.executable, "-m", "settler", "calibrate", *args, "--write", str(layer)], cwd=root,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    again = tomllib.loads(layer.read_text())
+    for key, value in stored["popbal"].items():
+        assert again["popbal"][key] == (pytest.approx(value, rel=1e-9) if isinstance(value, float) else value), key

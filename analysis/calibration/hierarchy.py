@@ -6,8 +6,8 @@
    over the gravitational collisions pi (a_i + a_j)^2 abs(dU) n_i n_j V (:mod:`analysis.kernel_run`); no fit, the
    standard error from the merge count, the velocity scatter and the time quadrature. Shear collisions are not in
    that run: popbal's shear kernel is scaled by E x shear_coefficient, and shear_coefficient is left to level 3.
-2. **transport** -- with coalescence off in both engines (the registry's transport runs), the plume closures:
-   :data:`LEVEL_PARAMETERS` ["transport"], with the flux form's radius factor k_R = phi_p^(-1/2) taken from the
+2. **transport** -- with coalescence off in both engines (the registry's transport runs), the plume and
+   return-flow closures: :data:`LEVEL_PARAMETERS` ["transport"], with the flux form's radius factor k_R = phi_p^(-1/2) taken from the
    zone diagnostics (the plume core's volume fraction phi_p at mid-height, ``zone_profile.csv``), not fitted.
 3. **whole** -- what is left, :data:`LEVEL_PARAMETERS` ["whole"], from the whole runs, with levels 1 and 2 held.
 
@@ -30,8 +30,9 @@ from .registry import Registry, refuse_holdouts
 from .targets import TARGET_COLUMNS, load_target, seed_scatter
 
 #: What each fitted level fits ([popbal] keys) and from where it starts.
-LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "plume_reynolds_scale"), "whole": ("shear_coefficient",)}
-START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "shear_coefficient": 1.0}
+LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "return_flow_ratio"),
+                    "whole": ("shear_coefficient",)}
+START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
 FORM = {"popbal.channel_radius_form": "flux"}
 #: The issue's targets: relative error of a window mean, fitted runs and hold-outs.

@@ -18,6 +18,7 @@ PARAMETERS: dict[str, tuple[float, float, str]] = {
     "feed_layer_coefficient": (1e-5, 10.0, "-"),
     "axis_velocity_ratio": (0.2, 5.0, "-"),
     "plume_reynolds_scale": (1e-2, 100.0, "-"),
+    "return_flow_ratio": (0.0, 100.0, "-"),
 }
 
 
