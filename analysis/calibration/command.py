@@ -27,6 +27,7 @@ def run_set(args) -> int:
     if out is not None:
         data = {"collision": result.collision, "values": result.values, "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,
+                "coverage": result.coverage,
                 "levels": [{k: v for k, v in fit.__dict__.items()} for fit in result.levels]}
         atomic_write_text(out / "hierarchy.json", to_json(data))
         atomic_write_text(out / "summary.txt", text + "\n")

@@ -14,7 +14,9 @@
 Each level is a :func:`analysis.calibration.fit.fit_level` (residuals from the runs' own scatter, a discrepancy
 term if the residuals call for one, the identifiability gate). The pre-registered hold-outs
 (:mod:`analysis.calibration.registry`) are refused as fitted runs, and are scored only when every level's gate has
-passed; otherwise the result says so and scores nothing.
+passed (otherwise the result says so and scores nothing): their relative errors at the estimates, and the share of
+their window means inside the 90 % prediction bands of :data:`BAND_SAMPLES` popbal runs over the calibration's
+parameter distribution and discrepancy (:mod:`analysis.calibration.bands`).
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_r
 FORM = {"popbal.channel_radius_form": "flux"}
 #: The issue's targets: relative error of a window mean, fitted runs and hold-outs.
 TARGETS = {"fitted": 0.10, "holdout": 0.20}
+#: popbal runs per hold-out for its 90 % prediction band.
+BAND_SAMPLES = 20
 #: Height band [-, of the column height] over which the core volume fraction is averaged for k_R.
 CORE_BAND = (0.3, 0.7)
 
@@ -53,6 +57,7 @@ class Hierarchy:
     holdout_errors: dict | None
     gate_passed: bool
     missing: dict[str, list[str]] = field(default_factory=dict)  # level -> registered runs not stored yet
+    coverage: dict | None = None  # the hold-outs' window means inside their 90 % bands (bands.coverage)
 
     def summary(self) -> str:
         c = self.collision
@@ -79,6 +84,10 @@ class Hierarchy:
         else:
             lines.append("hold-outs (pre-registered, scored once):")
             lines += _error_rows(self.holdout_errors, TARGETS["holdout"])
+            c = self.coverage
+            lines.append(f"  90 % bands ({c['samples']} popbal runs each) hold {c['inside']} of {c['total']} hold-out "
+                         f"window means ({c['share']:.0%})" + (f"; outside: {', '.join(f'{r} {k}' for r, k in c['outside'])}"
+                                                                if c["outside"] else ""))
         return "\n".join(lines)
 
 
@@ -121,7 +130,7 @@ def _stored(runs, reference_dir) -> tuple[list[str], list[str]]:
 
 
 def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
-                  profile: bool = True, progress: bool = True) -> Hierarchy:
+                  profile: bool = True, progress: bool = True, band_samples: int = BAND_SAMPLES) -> Hierarchy:
     """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds."""
     from analysis.kernel_run import kernel_run_efficiency
 
@@ -154,17 +163,43 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
             values[name] = (fit.estimates[name], fit.standard_errors[name])
             fixed[f"popbal.{name}"] = fit.estimates[name]
     gate_passed = all(f.gate["passed"] for f in levels) and collision["standard_error"] < 0.5 * collision["efficiency"]
-    holdout_errors = None
+    holdout_errors, coverage_result = None, None
     if gate_passed:
-        holdout_errors = {}
-        for run in _stored(registry.holdouts, reference_dir)[0]:
-            from .fit import reduced_means
-
-            target = load_target(run, reference_dir, seed)
-            means = reduced_means(target, Path(reference_dir) / run / "case.toml", {}, fixed)
-            holdout_errors[run] = {c: means[c] / target.means[c] - 1.0 for c in TARGET_COLUMNS}
+        holdout_errors, coverage_result = _score_holdouts(registry, reference_dir, seed, fixed, values, levels,
+                                                          band_samples)
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
-                     missing={k: v for k, v in missing.items() if v})
+                     missing={k: v for k, v in missing.items() if v}, coverage=coverage_result)
+
+
+def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, samples):
+    """The hold-outs' relative errors at the estimates, and the coverage of their window means by the 90 % bands
+    of ``samples`` popbal runs over the calibration's parameter distribution and discrepancy
+    (:mod:`analysis.calibration.bands`)."""
+    from .bands import band, coverage, parameter_samples
+    from .fit import reduced_means
+
+    keys = list(values)
+    estimates = {k: values[k][0] for k in keys}
+    covariance = np.zeros((len(keys), len(keys)))
+    covariance[0, 0] = values[keys[0]][1] ** 2  # the collision level
+    for fit in levels:
+        index = [keys.index(n) for n in fit.parameters]
+        se = np.array([fit.standard_errors[n] for n in fit.parameters])
+        covariance[np.ix_(index, index)] = fit.correlation * np.outer(se, se)
+    delta = max(fit.discrepancy for fit in levels)
+    draws = parameter_samples(estimates, covariance, keys, samples, seed=1)
+    errors, bands, observed = {}, {}, {}
+    for run in _stored(registry.holdouts, reference_dir)[0]:
+        target = load_target(run, reference_dir, seed)
+        case_file = Path(reference_dir) / run / "case.toml"
+        means = reduced_means(target, case_file, {}, fixed)
+        errors[run] = {c: means[c] / target.means[c] - 1.0 for c in TARGET_COLUMNS}
+        bands[run] = band(lambda v: reduced_means(target, case_file, v, fixed), draws, delta, seed=1)
+        observed[run] = dict(target.means)
+    result = coverage(bands, observed)
+    result["bands"] = {run: {c: [float(x) for x in q] for c, q in b.items()} for run, b in bands.items()}
+    result["samples"] = samples
+    return errors, result
 
 

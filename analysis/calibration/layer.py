@@ -90,6 +90,14 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
         for run, errors in result.holdout_errors.items():
             lines.append(f"error_{run} = [{', '.join(_float(errors[k]) for k in errors)}]  # - [derived] "
                          f"reduced / full - 1 of {', '.join(errors)}")
+        c = result.coverage or {}
+        if c:
+            lines.append(f"band_coverage = {c['share']!r}  # - [derived] {c['inside']} of {c['total']} hold-out "
+                         f"window means inside their 90 % bands ({c['samples']} popbal runs each)")
+            for run, columns in c["bands"].items():
+                for column, q in columns.items():
+                    lines.append(f"band_{run}_{column} = [{', '.join(repr(v) for v in q)}]  # [derived] 5, 50 and "
+                                 "95 % of the window mean")
     return "\n".join(lines) + "\n"
 
 
