@@ -198,8 +198,10 @@ def test_settler_calibrate_set_refuses_a_registry_that_fits_a_holdout(tmp_path):
 @pytest.mark.slow
 def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command(tmp_path):
     """The committed hierarchical layer (data/calibration/designed.toml) comes back from the command in its
-    [provenance], run from the repository root: the same [popbal] values to 1e-9 (popbal and the fit are
-    deterministic), and a provenance that names no machine folder. About 40 minutes on two cores."""
+    [provenance], run on a clean checkout of its recorded code commit (the reference runs of that commit: a run
+    stored later, such as a new seed pair, changes the weights): the same [popbal] values to 1e-9 (popbal and the
+    fit are deterministic), and a provenance that names no machine folder. About 40 minutes on two cores."""
+    import os
     import shlex
     import subprocess
     import sys
@@ -208,20 +210,29 @@ def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command
 
     root = Path(__file__).resolve().parents[1]
     stored_path = root / "data" / "calibration" / "designed.toml"
-    if not stored_path.is_file():
-        pytest.skip("no data/calibration/designed.toml committed")
+    if not stored_path.is_file() or not (root / ".git").exists():
+        pytest.skip("needs data/calibration/designed.toml in a git checkout")
     stored = tomllib.loads(stored_path.read_text())
-    command = shlex.split(stored["provenance"]["command"])
-    assert command[:2] == ["settler", "calibrate"] and "/work" not in stored["provenance"]["command"]
-    layer = tmp_path / "again.toml"
-    args = [a for a in command[2:]]
-    for option in ("--write", "--out"):
-        if option in args:
-            i = args.index(option)
-            del args[i:i + 2]
-    done = subprocess.run([sys.executable, "-m", "settler", "calibrate", *args, "--write", str(layer)], cwd=root,
-                          capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-2000:]
-    again = tomllib.loads(layer.read_text())
-    for key, value in stored["popbal"].items():
-        assert again["popbal"][key] == (pytest.approx(value, rel=1e-9) if isinstance(value, float) else value), key
+    provenance = stored["provenance"]
+    assert provenance["code_tree_dirty"] is False
+    command = shlex.split(provenance["command"])
+    assert command[:2] == ["settler", "calibrate"] and "/work" not in provenance["command"]
+    checkout = tmp_path / "checkout"
+    subprocess.run(["git", "-C", str(root), "worktree", "add", "--detach", str(checkout), provenance["code_commit"]],
+                   check=True, capture_output=True)
+    try:
+        args = list(command[2:])
+        for option in ("--write", "--out"):
+            if option in args:
+                i = args.index(option)
+                del args[i:i + 2]
+        layer = tmp_path / "again.toml"
+        env = {**os.environ, "PYTHONPATH": str(checkout)}
+        done = subprocess.run([sys.executable, "-m", "settler", "calibrate", *args, "--write", str(layer)],
+                              cwd=checkout, env=env, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr[-2000:]
+        again = tomllib.loads(layer.read_text())
+        for key, value in stored["popbal"].items():
+            assert again["popbal"][key] == (pytest.approx(value, rel=1e-9) if isinstance(value, float) else value), key
+    finally:
+        subprocess.run(["git", "-C", str(root), "worktree", "remove", "--force", str(checkout)], capture_output=True)
