@@ -153,6 +153,8 @@ def test_layer_records_the_levels_without_machine_paths_and_bands_read_its_covar
     path = write_layer(_hierarchy(fit), tmp_path / "layer.toml", registry, "settler calibrate --set x")
     text = path.read_text()
     assert str(tmp_path) not in text and "/work" not in text
+    within = sum(abs(e) <= 0.10 for errors in fit.errors.values() for e in errors.values())
+    assert f"# Targets: {within} of {4 * len(COVARIATES)} fitted window means within 10 %." in text
     layer = tomllib.loads(text)
     assert layer["provenance"]["registry"] == "data/holdouts.toml" and layer["provenance"]["gate_passed"] is False
     assert layer["popbal"]["shear_coefficient"] == pytest.approx(fit.estimates["shear_coefficient"])

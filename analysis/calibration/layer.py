@@ -12,7 +12,7 @@ from pathlib import Path
 
 from settler.output import OutputError, atomic_write_text, source_commit
 
-from .hierarchy import FORM, Hierarchy
+from .hierarchy import FORM, TARGETS, Hierarchy
 
 
 def _q(text) -> str:
@@ -33,6 +33,18 @@ def _float(value) -> str:
     return "nan" if value is None else repr(float(value))
 
 
+def _targets_line(result: Hierarchy) -> str:
+    """How many window means meet the issue's targets (10 % fitted, 20 % held out): the gate tests whether the
+    parameters are determined, not whether the model is right, so the layer says both."""
+    fitted = [abs(e) for fit in result.levels for errors in fit.errors.values() for e in errors.values()]
+    held = [abs(e) for errors in (result.holdout_errors or {}).values() for e in errors.values()]
+    text = (f"# Targets: {sum(e <= TARGETS['fitted'] for e in fitted)} of {len(fitted)} fitted window means within "
+            f"{100 * TARGETS['fitted']:.0f} %")
+    if result.holdout_errors is not None:
+        text += f", {sum(e <= TARGETS['holdout'] for e in held)} of {len(held)} held-out within {100 * TARGETS['holdout']:.0f} %"
+    return text + "."
+
+
 def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
     """The layer's TOML text (module docstring)."""
     commit = source_commit()
@@ -41,6 +53,7 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
     lines = ["# popbal's closures from the hierarchical calibration against the reference set (settler calibrate --set;",
              "# analysis/calibration). Level 1 the kernel run, level 2 the coalescence-off runs, level 3 the whole runs;",
              "# the pre-registered hold-outs are scored only if every level passes the identifiability gate.",
+             _targets_line(result),
              f"# Gate {'PASSED' if result.gate_passed else 'FAILED'}"
              + ("" if result.gate_passed else ": the values below are not to be used for predictions (no preset "
                                                 "applies this layer)") + ".", "", "[popbal]",
