@@ -128,8 +128,9 @@ def write_kernel_exposure(run_folder, dest, diameter_small: float = 0.5e-3, diam
     from settler.output import atomic_write_text, units_line
 
     frame, merges, bins = kernel_exposure(run_folder, diameter_small, diameter_large)
-    header = (units_line(EXPOSURE_UNITS) + f"# merges: {merges} between ({bins['small'][0]:.9g}, {bins['small'][1]:.9g}] "
-              f"and ({bins['large'][0]:.9g}, {bins['large'][1]:.9g}] m; sizes {diameter_small:g} and "
+    small, large = bins["small"], bins["large"]
+    header = (units_line(EXPOSURE_UNITS) + f"# merges: {merges} between ({small[0]:.9g}, {small[1]:.9g}] "
+              f"and ({large[0]:.9g}, {large[1]:.9g}] m; sizes {diameter_small:g} and "
               f"{diameter_large:g} m\n")
     path = Path(dest) / EXPOSURE_FILE
     atomic_write_text(path, header + frame.to_csv(index=False, float_format="%.9g"))
@@ -154,7 +155,8 @@ def kernel_run_efficiency(run_folder, diameter_small: float = 0.5e-3, diameter_l
     else:
         frame, merges, bins = kernel_exposure(run_folder, diameter_small, diameter_large, slice_height)
     exposure = {"times": frame["time"].to_numpy(), "exposure": frame["exposure"].to_numpy(),
-                "velocity_small": frame["velocity_small"].to_numpy(), "velocity_large": frame["velocity_large"].to_numpy()}
+                "velocity_small": frame["velocity_small"].to_numpy(),
+                "velocity_large": frame["velocity_large"].to_numpy()}
     result = collision_efficiency(merges, exposure, diameter_small, diameter_large)
     result.update(bins=bins, snapshots=len(frame))
     return result

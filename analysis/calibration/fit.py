@@ -176,7 +176,8 @@ def fit_level(level: str, targets: list[Target], case_files: dict, parameters, s
     relative = {t.name: {c: objective.last_means[t.name][c] / t.means[c] - 1.0 if objective.last_means[t.name] else
                          math.nan for c in columns} for t in targets}
     fit = LevelFit(level=level, runs=[t.name for t in targets], parameters=parameters,
-                   estimates=dict(zip(parameters, map(float, x))), standard_errors=dict(zip(parameters, map(float, se_values))),
+                   estimates=dict(zip(parameters, map(float, x))),
+                   standard_errors=dict(zip(parameters, map(float, se_values))),
                    correlation=correlation, discrepancy=objective.discrepancy, chi2=chi2, residual_count=m,
                    evaluations=objective.evaluations, status=str(status), errors=relative)
     if profile:

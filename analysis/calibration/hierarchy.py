@@ -7,7 +7,8 @@
    standard error from the merge count, the velocity scatter and the time quadrature. Shear collisions are not in
    that run: popbal's shear kernel is scaled by E x shear_coefficient, and shear_coefficient is left to level 3.
 2. **transport** -- with coalescence off in both engines (the registry's transport runs), the plume and
-   return-flow closures: :data:`LEVEL_PARAMETERS` ["transport"], with the flux form's radius factor k_R = phi_p^(-1/2) taken from the
+   return-flow closures: :data:`LEVEL_PARAMETERS` ["transport"], with the flux form's radius factor
+   k_R = phi_p^(-1/2) taken from the
    zone diagnostics (the plume core's volume fraction phi_p at mid-height, ``zone_profile.csv``), not fitted.
 3. **whole** -- what is left, :data:`LEVEL_PARAMETERS` ["whole"], from the whole runs, with levels 1 and 2 held.
 
@@ -64,7 +65,8 @@ class Hierarchy:
         lines = [f"level collision: E = {c['efficiency']:.3f} +- {c['standard_error']:.3f} from the kernel run "
                  f"({c['merges']} merges against {c['expected_collisions']:.0f} gravitational collisions)",
                  f"flux form radius factor from the zone diagnostics: k_R = {self.radius_factor['value']:.2f} "
-                 f"(core volume fraction {self.radius_factor['core_fraction']:.4f} in {', '.join(self.radius_factor['runs'])})"]
+                 f"(core volume fraction {self.radius_factor['core_fraction']:.4f} in "
+                 f"{', '.join(self.radius_factor['runs'])})"]
         for fit in self.levels:
             lines.append(f"level {fit.level}: runs {', '.join(fit.runs)}; chi2 {fit.chi2:.3g} for {fit.residual_count} "
                          f"residuals, discrepancy {fit.discrepancy:.3g}, {fit.evaluations} model runs ({fit.status})")
@@ -86,8 +88,8 @@ class Hierarchy:
             lines += _error_rows(self.holdout_errors, TARGETS["holdout"])
             c = self.coverage
             lines.append(f"  90 % bands ({c['samples']} popbal runs each) hold {c['inside']} of {c['total']} hold-out "
-                         f"window means ({c['share']:.0%})" + (f"; outside: {', '.join(f'{r} {k}' for r, k in c['outside'])}"
-                                                                if c["outside"] else ""))
+                         f"window means ({c['share']:.0%})"
+                         + (f"; outside: {', '.join(f'{r} {k}' for r, k in c['outside'])}" if c["outside"] else ""))
         return "\n".join(lines)
 
 

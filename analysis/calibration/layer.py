@@ -41,7 +41,8 @@ def _targets_line(result: Hierarchy) -> str:
     text = (f"# Targets: {sum(e <= TARGETS['fitted'] for e in fitted)} of {len(fitted)} fitted window means within "
             f"{100 * TARGETS['fitted']:.0f} %")
     if result.holdout_errors is not None:
-        text += f", {sum(e <= TARGETS['holdout'] for e in held)} of {len(held)} held-out within {100 * TARGETS['holdout']:.0f} %"
+        text += (f", {sum(e <= TARGETS['holdout'] for e in held)} of {len(held)} held-out within "
+                 f"{100 * TARGETS['holdout']:.0f} %")
     return text + "."
 
 
@@ -50,9 +51,10 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
     commit = source_commit()
     k_r = result.radius_factor
     c = result.collision
-    lines = ["# popbal's closures from the hierarchical calibration against the reference set (settler calibrate --set;",
-             "# analysis/calibration). Level 1 the kernel run, level 2 the coalescence-off runs, level 3 the whole runs;",
-             "# the pre-registered hold-outs are scored only if every level passes the identifiability gate.",
+    lines = ["# popbal's closures from the hierarchical calibration against the reference set",
+             "# (settler calibrate --set; analysis/calibration). Level 1 the kernel run, level 2 the coalescence-off",
+             "# runs, level 3 the whole runs; the pre-registered hold-outs are scored only if every level passes",
+             "# the identifiability gate.",
              _targets_line(result),
              f"# Gate {'PASSED' if result.gate_passed else 'FAILED'}"
              + ("" if result.gate_passed else ": the values below are not to be used for predictions (no preset "
@@ -79,7 +81,8 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
               f"merges = {c['merges']}  # - [derived] of the two fed sizes' bins",
               f"expected_collisions = {c['expected_collisions']!r}  # - [derived] at efficiency 1"]
     for fit in result.levels:
-        lines += ["", f"[provenance.{fit.level}]", f"runs = [{', '.join(_q(r) for r in fit.runs)}]  # [derived] the level's fitted runs",
+        lines += ["", f"[provenance.{fit.level}]",
+                  f"runs = [{', '.join(_q(r) for r in fit.runs)}]  # [derived] the level's fitted runs",
                   f"chi2 = {fit.chi2!r}  # - [derived] for {fit.residual_count} residuals",
                   f"discrepancy = {fit.discrepancy!r}  # - [derived] relative model discrepancy added to every sigma",
                   f"model_runs = {fit.evaluations}  # - [derived]", f"status = {_q(fit.status)}",

@@ -18,7 +18,8 @@ The standard error of a window mean (what a residual is divided by) comes from t
   as n_eff = n (1 - rho) / (1 + rho) independent ones (the large-n variance of the mean of an AR(1) series) and
   se_within = s / sqrt(n_eff). The settling flux's se is the slope's standard error, inflated alike.
 * **between seeds** -- the relative difference of the window means of a seed pair (simple and simple_seed2 over
-  the common steady window of their common span), divided by sqrt(2) for one run's scatter: se_seed = that x abs(mean). It is the
+  the common steady window of their common span), divided by sqrt(2) for one run's scatter: se_seed = that x
+  abs(mean). It is the
   scatter a replicate would show, which the within-run blocks miss (a run's mean count depends on its seed more
   than on its own fluctuation). Where a column has no seed pair the seed term is 0 and noted.
 
@@ -123,8 +124,8 @@ def within_run_errors(series: pd.DataFrame, window, block: float = BLOCK) -> tup
             values = np.diff(at) / block  # the settling flux of each block [kg/s]
         else:
             y = series[column].to_numpy(float)
-            values = np.array([np.nanmean(y[(t > a + 1e-9) & (t <= b + 1e-9)]) if ((t > a + 1e-9) & (t <= b + 1e-9)).any()
-                               else math.nan for a, b in zip(edges[:-1], edges[1:])])
+            masks = [(t > a + 1e-9) & (t <= b + 1e-9) for a, b in zip(edges[:-1], edges[1:])]
+            values = np.array([np.nanmean(y[m]) if m.any() else math.nan for m in masks])
         ok = np.isfinite(values)
         if ok.sum() < 3:
             errors[column], counts[column] = math.nan, 0.0
