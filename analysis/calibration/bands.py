@@ -18,6 +18,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from .uncertainty import PARAMETERS
 
@@ -49,13 +50,7 @@ def covariance_from_layer(path) -> tuple[dict[str, float], np.ndarray, list[str]
             keys.append(n)
             estimates[n] = float(table[n][0])
         delta = max(delta, float(table.get("discrepancy", 0.0)))
-    size = sum(b.shape[0] for b in blocks)
-    covariance = np.zeros((size, size))
-    at = 0
-    for b in blocks:
-        covariance[at:at + b.shape[0], at:at + b.shape[0]] = b
-        at += b.shape[0]
-    return estimates, covariance, keys, delta
+    return estimates, block_diag(*blocks), keys, delta
 
 
 def parameter_samples(estimates: dict, covariance, keys, count: int, seed: int = 0) -> list[dict[str, float]]:

@@ -89,10 +89,10 @@ class _Objective:
     def sigma(self, target, column):
         return math.hypot(target.standard_errors[column], self.discrepancy * abs(target.means[column]))
 
-    def means(self, x, pinned: dict | None = None):
+    def means(self, x):
         from settler.cases import CaseError
 
-        values = {**dict(zip(self.parameters, x)), **(pinned or {})}
+        values = dict(zip(self.parameters, x))
         self.evaluations += 1
         if self.progress:
             print(f"\rcalibrate: model run {self.evaluations}", end="", file=sys.stderr, flush=True)
@@ -117,8 +117,8 @@ class _Objective:
                 r.append(residual if math.isfinite(residual) else 1e3)
         return np.array(r)
 
-    def __call__(self, x, pinned=None):
-        means = self.means(x, pinned)
+    def __call__(self, x):
+        means = self.means(x)
         self.last_means = means
         return self.residuals_of(means)
 
@@ -129,11 +129,10 @@ def _bounds(parameters):
     return low, high
 
 
-def _least_squares(objective, x0, low, high, budget, pinned=None):
-    fun = (lambda x: objective(x, pinned)) if pinned else objective
+def _least_squares(objective, x0, low, high, budget):
     x0 = np.clip(np.asarray(x0, dtype=float), low + 1e-6 * (high - low), high - 1e-6 * (high - low))
     # relative steps of 1 %: popbal's outputs move in small jumps with a parameter (sections, cells)
-    return least_squares(fun, x0, bounds=(low, high), diff_step=1e-2, x_scale=np.maximum(np.abs(x0), 1e-3),
+    return least_squares(objective, x0, bounds=(low, high), diff_step=1e-2, x_scale=np.maximum(np.abs(x0), 1e-3),
                          max_nfev=max(2, budget), method="trf")
 
 

@@ -152,8 +152,10 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
              "popbal.collision_efficiency": collision["efficiency"]}
     levels = []
     for level in ("transport", "whole"):
-        runs, missing[level] = _stored(registry.levels.get(level, ()), reference_dir) if level == "whole" else \
-            (transport_runs, missing["transport"])
+        if level == "transport":
+            runs = transport_runs
+        else:
+            runs, missing[level] = _stored(registry.levels.get(level, ()), reference_dir)
         refuse_holdouts(runs, registry, f"level {level}")
         targets = [load_target(r, reference_dir, seed) for r in runs]
         case_files = {r: Path(reference_dir) / r / "case.toml" for r in runs}

@@ -6,11 +6,10 @@ identifiability gate has passed; :func:`refuse_holdouts` is the one check every 
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from settler.cases import DATA_DIR
+from settler.cases import DATA_DIR, CaseError, _read_toml
 
 #: The registry shipped with the toolkit.
 REGISTRY = DATA_DIR / "calibration" / "holdouts.toml"
@@ -37,11 +36,9 @@ def load_registry(path: str | Path = REGISTRY) -> Registry:
     """Read and check a registry file (see ``data/calibration/holdouts.toml``)."""
     path = Path(path)
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise RegistryError(f"{path}: cannot be read ({exc.strerror or exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise RegistryError(f"{path}: not valid TOML ({exc})") from None
+        raw = _read_toml(path, "hold-out registry")  # the project's TOML reader and its one-line refusals
+    except CaseError as exc:
+        raise RegistryError(str(exc)) from None
     holdouts = tuple(raw.get("holdouts", {}).get("runs", ()))
     why = dict(raw.get("holdouts", {}).get("why", {}))
     families = {k: tuple(v) for k, v in raw.get("families", {}).items()}

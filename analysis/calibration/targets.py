@@ -77,15 +77,12 @@ def window_of(series: pd.DataFrame) -> tuple[tuple[float, float], bool]:
     return (end * 2.0 / 3.0, end), False
 
 
-def _inside(t: np.ndarray, window) -> np.ndarray:
-    return (t > window[0] + 1e-9) & (t <= window[1] + 1e-9)
-
-
 def window_means(series: pd.DataFrame, window) -> dict[str, float]:
     """The :data:`TARGET_COLUMNS` of a time series over ``window`` [s]: means, and the settling flux's slope."""
+    from analysis.evidence import steady_means
+
     t = series["time"].to_numpy(float)
-    inside = _inside(t, window)
-    out = {c: float(series.loc[inside, c].mean()) for c in TARGET_COLUMNS if c != "settling_flux"}
+    out = steady_means(series, [c for c in TARGET_COLUMNS if c != "settling_flux"], window[0], window[1])
     with_start = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
     out["settling_flux"] = float(np.polyfit(t[with_start], series["mass_settled"].to_numpy(float)[with_start], 1)[0])
     return out
