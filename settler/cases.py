@@ -6,7 +6,9 @@ A case is resolved in layers, later ones winning:
    constants, each with its source;
 2. the *calibration layer* named by ``case.calibration`` (``data/calibration/<name>.toml``, written by ``settler
    calibrate``): popbal's closures fitted to the full engine's reference runs, with their provenance in a
-   ``[provenance]`` table that is not merged; ``"none"``: no layer;
+   ``[provenance]`` table that is not merged; ``"none"``: no layer. A layer named by an *override*
+   (``case.calibration=NAME``) is applied after the case file instead, so that it replaces the file's values of the
+   keys it sets: that is how a run's resolved ``case.toml``, which spells out every key, takes a layer;
 3. the *case file* (``data/cases/<name>.toml`` or any path): geometry, feeds, size limit, submodel switches;
 4. *overrides* ``section.key=value`` from the command line or from :func:`load_case`'s ``overrides``.
 
@@ -71,7 +73,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                   "file must give every key.", optional=True),
         "calibration": Field(S, "", "Calibration layer in data/calibration/ (e.g. 'paper': popbal's closures fitted "
                                     "to the full engine's reference runs by 'settler calibrate'), applied over the "
-                                    "property set and under the case file and overrides; absent or 'none': none.",
+                                    "property set and under the case file and overrides; named by an override, "
+                                    "over the case file; absent or 'none': none.",
                              optional=True),
     },
     "geometry": {
@@ -443,9 +446,14 @@ def resolve(raw: dict, overrides=None, source: str = "") -> Case:
             raise CaseError(f"case.properties = {prop_name!r}: no property set {ppath}; available: "
                             + ", ".join(sorted(p.stem for p in (DATA_DIR / "properties").glob("*.toml"))))
         _merge(merged, _read_toml(ppath, "property set"), f"property set {prop_name}")
-    if calibration is not None and calibration != NO_CALIBRATION:
+    # A layer named in the file sits under the file's own values; a layer named by an override sits over them,
+    # so that case.calibration=NAME applies NAME's values to any case file, a run's resolved case.toml included.
+    layer_over_file = "case.calibration" in overrides
+    if calibration is not None and calibration != NO_CALIBRATION and not layer_over_file:
         _merge(merged, read_calibration(calibration), f"calibration layer {calibration}")
     _merge(merged, raw, source or "case")
+    if calibration is not None and calibration != NO_CALIBRATION and layer_over_file:
+        _merge(merged, read_calibration(calibration), f"calibration layer {calibration}")
     for key, value in overrides.items():
         section, _, name = key.partition(".")
         if not name:

@@ -14,8 +14,10 @@ from scipy.optimize import least_squares
 import popbal
 from analysis import calibrate as cal
 from settler import cases as cases_module
-from settler.cases import CaseError, load_case
+from settler.cases import DATA_DIR, CaseError, load_case
 from settler.output import write_time_series
+
+REFERENCE_DIR = DATA_DIR / "reference"
 
 #: Coarse, short popbal settings so a model run takes a fraction of a second (5 cells, 1 section per doubling).
 COARSE = {"popbal.height_cells": 10, "popbal.sections_per_doubling": 1, "popbal.time_step": 0.1,
@@ -181,6 +183,21 @@ def test_layer_carries_the_keys_held_fixed(fitted, tmp_path, monkeypatch):
     case = load_case("simple", {"case.calibration": "formed"})
     assert case.popbal.channel_radius_form == "flux"
     assert case.popbal.channel_coefficient == fitted.estimates["channel_coefficient"]
+
+
+def test_a_layer_named_by_an_override_replaces_a_resolved_case_files_values():
+    """A run's resolved case.toml spells out every [popbal] key; ``case.calibration=NAME`` as an override must still
+    apply the layer (over the file), and an explicit override of a key still beats the layer. (Before, the file's
+    uncalibrated values silently won and the layer changed nothing.)"""
+    resolved = REFERENCE_DIR / "deep_w002" / "case.toml"
+    layer = tomllib.loads(cases_module.calibration_path("designed").read_text())["popbal"]
+    plain = load_case(resolved)
+    assert any(getattr(plain.popbal, name) != value for name, value in layer.items())
+    case = load_case(resolved, {"case.calibration": "designed"})
+    for name, value in layer.items():
+        assert getattr(case.popbal, name) == value, name
+    beaten = load_case(resolved, {"case.calibration": "designed", "popbal.shear_coefficient": 0.5})
+    assert beaten.popbal.shear_coefficient == 0.5
 
 
 @pytest.mark.parametrize("preset", ["simple", "cubic"])
