@@ -32,6 +32,7 @@ import io
 import math
 import re
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -255,6 +256,7 @@ class Comparison:
     errors: pd.DataFrame
     windows: list[Window]
     skipped: dict[str, str]
+    band: "Band | None" = None
 
     @property
     def compared(self) -> list[str]:
@@ -288,6 +290,78 @@ def compare(full, reduced, windows=None) -> Comparison:
                       windows=windows, skipped=skipped)
 
 
+# -------------------------------------------------------------------------------------------------- the band
+#: Columns a band adds to the error table: the 5 %, 50 % and 95 % quantiles of the reduced window mean over the
+#: band's runs, and whether the full run's window mean lies inside the 90 % band.
+BAND_COLUMNS = ["band_low", "band_median", "band_high", "inside_band"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Band:
+    """The reduced model's 90 % prediction band (:mod:`analysis.calibration.bands`): ``samples`` popbal runs of the
+    reduced run's case with the calibration ``layer`` applied and its parameters drawn from the layer's estimates
+    and covariance, each run's columns times exp(delta z) for the layer's model discrepancy delta.
+    ``quantiles``: {column: (3, rows)} 5/50/95 % on the side-by-side table's times; ``windows``: the window means'
+    quantiles per column and window (columns ``column``, ``window`` and :data:`BAND_COLUMNS`)."""
+
+    layer: str
+    samples: int
+    delta: float
+    quantiles: dict
+    windows: pd.DataFrame
+
+
+def prediction_band(comparison: Comparison, layer: str, samples: int = 20, seed: int = 0, progress=None) -> Band:
+    """The :class:`Band` of ``comparison``'s reduced run under calibration ``layer`` (a layer of ``settler calibrate
+    --set`` in data/calibration/), from ``samples`` popbal runs to the reduced run's end time at its output
+    interval. ``progress``: a callable (done, total) or None."""
+    from .calibration.bands import QUANTILES, discrepancy_factors, sample_runs
+
+    reduced = comparison.reduced.timeseries
+    times = np.sort(reduced["time"].to_numpy(dtype=float))
+    interval = float(np.median(np.diff(times))) if times.size > 1 else float(times.max())
+    series, delta = sample_runs(comparison.reduced.folder / "case.toml", layer, samples, float(times.max()),
+                                interval, seed=seed, progress=progress)
+    factors = discrepancy_factors(samples, comparison.compared, delta, seed)
+    full_time = comparison.table["time"].to_numpy()
+    quantiles, rows = {}, []
+    for column in comparison.compared:
+        stack = np.stack([side_by_side(comparison.full.timeseries, s)[f"{column}_reduced"].to_numpy()
+                          for s in series]) * factors[column][:, None]
+        with warnings.catch_warnings():  # rows where every run is NaN (before the first droplet) stay NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            quantiles[column] = np.nanquantile(stack, QUANTILES, axis=0)
+        full = comparison.table[f"{column}_full"].to_numpy()
+        for window in comparison.windows:
+            inside = (full_time >= window.start) & (full_time <= window.end) & np.isfinite(full)
+            means = np.array([np.nanmean(row[inside]) if np.isfinite(row[inside]).any() else np.nan
+                              for row in stack])
+            low, median, high = (np.nanquantile(means, QUANTILES) if np.isfinite(means).any()
+                                 else (np.nan, np.nan, np.nan))
+            mean_full = float(np.mean(full[inside])) if inside.any() else math.nan
+            rows.append({"column": column, "window": window.name, "band_low": low, "band_median": median,
+                         "band_high": high, "inside_band": bool(low <= mean_full <= high)
+                         if math.isfinite(mean_full) and math.isfinite(low) else None})
+    return Band(layer=layer, samples=samples, delta=delta, quantiles=quantiles,
+                windows=pd.DataFrame(rows, columns=["column", "window", *BAND_COLUMNS]))
+
+
+def with_band(comparison: Comparison, band: Band) -> Comparison:
+    """``comparison`` with ``band`` attached and its error table widened by :data:`BAND_COLUMNS`."""
+    errors = comparison.errors.merge(band.windows, on=["column", "window"], how="left")
+    return dataclasses.replace(comparison, band=band, errors=errors)
+
+
+def band_summary(band: Band, window: str = "steady") -> str:
+    """One line: how many of the full run's window means in ``window`` lie inside their 90 % band."""
+    rows = band.windows[(band.windows["window"] == window) & band.windows["inside_band"].notna()]
+    inside = int(rows["inside_band"].astype(bool).sum())
+    outside = ", ".join(rows.loc[~rows["inside_band"].astype(bool), "column"])
+    return (f"90 % band ({band.samples} popbal runs of calibration layer {band.layer!r}, discrepancy "
+            f"{band.delta:.3g}): {inside} of {len(rows)} {window}-window means of the full run inside"
+            + (f"; outside: {outside}" if outside else ""))
+
+
 # ------------------------------------------------------------------------------------------------- the figure
 #: Scale and unit shown on the figure's axes, per unit of :data:`COLUMNS`.
 DISPLAY = {"m": (1e3, "mm"), "m/s": (1e3, "mm/s"), "-": (1.0, "-")}
@@ -310,6 +384,10 @@ def comparison_figure(comparison: Comparison):
         scale, unit = DISPLAY[COLUMNS[column][0]]
         ax.plot(comparison.table["time"], scale * comparison.table[f"{column}_full"], label="full (fulldem)")
         ax.plot(reduced["time"], scale * reduced[column], label="reduced (popbal)", linestyle="--")
+        if comparison.band is not None and column in comparison.band.quantiles:
+            q = comparison.band.quantiles[column]
+            ax.fill_between(comparison.table["time"], scale * q[0], scale * q[-1], color="C1", alpha=0.2,
+                            linewidth=0, label=f"90 % band ({comparison.band.layer})")
         low, high = ax.get_ylim()  # headroom above the curves for the windows' notes
         ax.set_ylim(low, high + (0.12 + 0.09 * max(window_levels(comparison.windows), default=0)) * (high - low))
         _shade_windows(ax, comparison, column)
@@ -372,14 +450,27 @@ def add_arguments(parser) -> None:
                         help="time windows [s] for the errors, comma-separated: START:END, NAME=START:END, or the "
                              "words quarters (q1..q4 of the common span), steady (its last third), default (both; "
                              "the default)")
+    parser.add_argument("--band", metavar="LAYER", default=None,
+                        help="draw the reduced model's 90 %% prediction band: popbal rerun on the reduced run's case "
+                             "with this calibration layer of 'settler calibrate --set' (a name in data/calibration/, "
+                             "e.g. designed), its parameters drawn from the layer's estimates and covariance and its "
+                             "model discrepancy added; errors.csv then says whether each full window mean lies inside")
+    parser.add_argument("--band-samples", metavar="N", type=int, default=20,
+                        help="popbal runs for the band (default 20; at least 5)")
 
 
 def write_outputs(comparison: Comparison, out: Path, command_line: str | None = None) -> dict[str, Path]:
     """Write :data:`OUTPUT_FILES` into ``out`` (atomically); returns name -> path."""
     units = {"time": "s", **{f"{c}_{side}": COLUMNS[c][0] for c in COLUMNS for side in ("full", "reduced")}}
     paths = {name: out / name for name in OUTPUT_FILES}
+    table = comparison.table.copy()
+    if comparison.band is not None:
+        for column, q in comparison.band.quantiles.items():
+            for name, row in zip(("band_low", "band_high"), (q[0], q[-1])):
+                table[f"{column}_{name}"] = row
+                units[f"{column}_{name}"] = COLUMNS[column][0]
     atomic_write_text(paths["comparison.csv"], "# units: " + ", ".join(f"{c} [{u}]" for c, u in units.items())
-                      + "\n" + comparison.table.to_csv(index=False))
+                      + "\n" + table.to_csv(index=False))
     atomic_write_text(paths["errors.csv"], "# units: start [s], end [s], points [-], mean_full and mean_reduced "
                       "[unit of the column, comparison.json], relative_error [-]\n"
                       + comparison.errors.to_csv(index=False))
@@ -393,6 +484,13 @@ def write_outputs(comparison: Comparison, out: Path, command_line: str | None = 
             "windows": [dataclasses.asdict(w) for w in comparison.windows], "window_unit": "s",
             "columns": {c: {"unit": u, "meaning": m} for c, (u, m) in COLUMNS.items()},
             "skipped": comparison.skipped}
+    if comparison.band is not None:
+        b = comparison.band
+        info["band"] = {"layer": b.layer, "samples": b.samples, "discrepancy": b.delta, "quantiles": [0.05, 0.5, 0.95],
+                        "definition": "popbal on the reduced run's case with the layer applied, its parameters drawn "
+                                      "from the layer's estimates and covariance, each run times exp(delta z); "
+                                      "comparison.csv <column>_band_low/_high per row, errors.csv band_* per window",
+                        "summary": band_summary(b)}
     atomic_write_text(paths["comparison.json"], to_json(info) + "\n")
     return paths
 
@@ -423,6 +521,8 @@ def main(args) -> int:
     for a folder that is not a run, bad windows or an unusable output folder."""
     prepare_output_folder(args.out, option="--out", create=False)  # refuse a bad --out before the work
     comparison = compare(args.full, args.reduced, windows=args.windows)
+    if args.band is not None:
+        comparison = _add_band(comparison, args.band, args.band_samples)
     for run, wanted in ((comparison.full, "fulldem"), (comparison.reduced, "popbal")):
         if run.engine != wanted:
             print(f"settler compare: warning: {run.folder} was made by {run.engine or 'an unknown engine'}, "
@@ -434,5 +534,27 @@ def main(args) -> int:
           f"t = {comparison.table['time'].min():g}-{comparison.table['time'].max():g} s, "
           f"{len(comparison.table)} rows")
     print(error_summary(comparison))
+    if comparison.band is not None:
+        print(band_summary(comparison.band))
     print(f"wrote {', '.join(str(p) for p in paths.values())}")
     return 0
+
+
+def _add_band(comparison: Comparison, layer: str, samples: int) -> Comparison:
+    """The command's band: clear errors for a bad --band or --band-samples, a progress bar on stderr."""
+    from tqdm import tqdm
+
+    from settler.cases import CaseError
+
+    if samples < 5:
+        raise OutputError(f"--band-samples {samples}: allowed: an integer of at least 5 (a 90 % band from fewer "
+                          "runs is its extremes)")
+    bar = tqdm(total=samples, desc="band", unit="run", file=sys.stderr, disable=None)
+    try:
+        band = prediction_band(comparison, layer, samples, progress=lambda done, total: bar.update(1))
+    except (ValueError, CaseError) as exc:
+        raise OutputError(f"--band {layer}: {exc}; allowed: a layer written by 'settler calibrate --set' "
+                          "(e.g. designed)") from None
+    finally:
+        bar.close()
+    return with_band(comparison, band)

@@ -3,6 +3,8 @@ skipped columns, and ``settler compare`` on the stored deep reference against a 
 
 import json
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,6 +16,7 @@ from settler.cli import main
 from settler.output import OutputError, read_time_series, time_series_frame, write_run_metadata, write_time_series
 
 REFERENCE = "data/reference/deep"
+DESIGNED = "data/calibration/designed.toml"
 
 
 def _series(time, **columns):
@@ -189,3 +192,71 @@ def test_command_refuses_what_is_not_a_run(tmp_path, reduced_deep, capsys):
     assert "--windows '5:1'" in capsys.readouterr().err
     assert main(["compare", REFERENCE, str(reduced_deep), "--out", str(reduced_deep)]) == 2  # a run folder
     assert "holds another run" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------------- the band
+def _certain_layer(path, delta=0.0):
+    """data/calibration/designed.toml with every standard error and the discrepancies set to 0 (or ``delta``): a
+    layer whose band must collapse onto the run at its estimates."""
+    import re
+
+    text = (Path(DESIGNED).read_text(encoding="utf-8"))
+    text = re.sub(r"^standard_error = [^ ]+", "standard_error = 0.0", text, flags=re.M)
+    text = re.sub(r"^discrepancy = [^ ]+", f"discrepancy = {delta!r}", text, flags=re.M)
+    text = re.sub(r"^(channel_coefficient|return_flow_ratio|shear_coefficient) = \[([^,]+), [^,]+, ",
+                  r"\1 = [\2, 0.0, ", text, flags=re.M)  # [estimate, standard error 0, profile interval]
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.fixture
+def certain_layer(tmp_path, monkeypatch):
+    from settler import cases
+
+    layer = _certain_layer(tmp_path / "certain.toml")
+    real = cases.calibration_path
+    monkeypatch.setattr(cases, "calibration_path", lambda name: layer if name == "certain" else real(name))
+    return "certain"
+
+
+def test_band_of_a_layer_without_uncertainty_is_the_run_at_its_estimates(tmp_path, reduced_deep, certain_layer):
+    """No parameter spread and no discrepancy: every band run is popbal on the reduced run's case with the layer's
+    values, so the band's ends equal that run's columns on the full run's times (to round-off), and a full window
+    mean lies inside only if it equals the reduced one."""
+    import popbal
+    from analysis.compare import prediction_band, with_band
+    from settler.cases import load_case
+
+    comparison = compare(REFERENCE, reduced_deep)
+    band = prediction_band(comparison, certain_layer, samples=5)
+    assert band.delta == 0.0 and band.samples == 5
+    at_estimates = popbal.run(popbal.setup(load_case(reduced_deep / "case.toml", {"case.calibration": "certain"})),
+                              end_time=20.0, output_interval=1.0, progress=False).timeseries
+    expected = side_by_side(comparison.full.timeseries, at_estimates)
+    for column in ("droplet_count", "mean_diameter", "channel_velocity"):
+        low, high = band.quantiles[column][0], band.quantiles[column][-1]
+        np.testing.assert_allclose(low, expected[f"{column}_reduced"], rtol=1e-9)
+        np.testing.assert_allclose(high, expected[f"{column}_reduced"], rtol=1e-9)
+    widened = with_band(comparison, band).errors
+    row = widened[(widened["column"] == "droplet_count") & (widened["window"] == "steady")].iloc[0]
+    assert row["band_low"] == pytest.approx(row["band_high"], rel=1e-9)
+    assert row["inside_band"] == (row["band_low"] <= row["mean_full"] <= row["band_high"])
+
+
+def test_band_command_writes_the_band_and_refuses_a_layer_without_covariance(tmp_path, reduced_deep, capsys,
+                                                                             certain_layer):
+    out = tmp_path / "banded"
+    assert main(["compare", REFERENCE, str(reduced_deep), "--out", str(out), "--band", certain_layer,
+                 "--band-samples", "5"]) == 0
+    assert "90 % band (5 popbal runs of calibration layer 'certain'" in capsys.readouterr().out
+    table = read_time_series(out / "comparison.csv")
+    assert {"droplet_count_band_low", "droplet_count_band_high"} <= set(table.columns)
+    errors = pd.read_csv(out / "errors.csv", comment="#")
+    assert {"band_low", "band_median", "band_high", "inside_band"} <= set(errors.columns)
+    assert json.loads((out / "comparison.json").read_text())["band"]["layer"] == "certain"
+    for args, what in ((["--band", "paper"], "--band paper: .*no \\[provenance.collision\\]"),
+                       (["--band", "missing"], "--band missing: .*no calibration layer"),
+                       (["--band", certain_layer, "--band-samples", "3"], "--band-samples 3: allowed")):
+        assert main(["compare", REFERENCE, str(reduced_deep), "--out", str(tmp_path / "o"), *args]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and re.search(what, err), err

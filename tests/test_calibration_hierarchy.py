@@ -185,6 +185,21 @@ def test_band_of_a_linear_prediction_matches_its_analytic_spread_and_covers_nine
     assert result["share"] == pytest.approx(0.9, abs=0.04)
 
 
+def test_discrepancy_is_a_log_normal_factor_with_the_stated_quantiles():
+    """A model output y = 2 with no parameter spread and discrepancy delta: the band is 2 exp(+-1.645 delta), the
+    quantiles of a log-normal factor, within 4 standard errors of a sample quantile (40 000 draws: the 5 % quantile
+    of z has standard error sqrt(0.05 0.95 / n) / phi(1.645) = 0.0106, so 4.3 % of delta in relative terms); and it
+    stays positive even at delta = 1, where 1 + delta z would go below zero for 5 % of the draws."""
+    from analysis.calibration.bands import band
+
+    samples = [{}] * 40000
+    for delta in (0.3, 1.0):
+        q = band(lambda v: {"y": 2.0}, samples, delta=delta, seed=5)["y"]
+        assert q[0] == pytest.approx(2.0 * math.exp(-1.645 * delta), rel=0.043 * delta)
+        assert q[2] == pytest.approx(2.0 * math.exp(1.645 * delta), rel=0.043 * delta)
+        assert q[0] > 0.0
+
+
 def test_settler_calibrate_set_refuses_a_registry_that_fits_a_holdout(tmp_path):
     import subprocess
     import sys

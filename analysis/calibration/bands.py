@@ -2,9 +2,11 @@
 
 A band is the spread of popbal's output over parameter samples drawn from the calibration's estimates and
 covariance (a Laplace approximation of the posterior: a multivariate normal per level, the levels independent,
-as each was fitted with the levels before it held), each sample's output multiplied by (1 + delta z) with z a
+as each was fitted with the levels before it held), each sample's output multiplied by exp(delta z) with z a
 standard normal per column and delta the fit's relative model discrepancy (what the model gets wrong whatever its
-parameters). Quantiles :data:`QUANTILES` (5 %, 50 %, 95 %) give the 90 % band.
+parameters): a log-normal factor, equal to 1 + delta z to first order but never negative, since a count, a size
+or a velocity cannot change sign by a misfit (with delta = 0.55, 1 + delta z is below 0 for 1 sample in 30).
+Quantiles :data:`QUANTILES` (5 %, 50 %, 95 %) give the 90 % band.
 
 :func:`covariance_from_layer` reads a layer written by ``settler calibrate --set`` (its [provenance] tables);
 :func:`parameter_samples` draws; :func:`band` runs a model over the samples; :func:`coverage` is the check the
@@ -66,13 +68,13 @@ def parameter_samples(estimates: dict, covariance, keys, count: int, seed: int =
 
 def band(model, samples, delta: float = 0.0, seed: int = 0, quantiles=QUANTILES) -> dict[str, np.ndarray]:
     """{column: array (len(quantiles), ...)} of ``model(values) -> {column: value or array}`` over the parameter
-    ``samples``, each output times (1 + delta z), z ~ N(0, 1) per sample and column."""
+    ``samples``, each output times exp(delta z), z ~ N(0, 1) per sample and column."""
     rng = np.random.default_rng(seed + 1)
     outputs: dict[str, list] = {}
     for values in samples:
         result = model(values)
         for column, value in result.items():
-            outputs.setdefault(column, []).append(np.asarray(value, dtype=float) * (1.0 + delta * rng.normal()))
+            outputs.setdefault(column, []).append(np.asarray(value, dtype=float) * math.exp(delta * rng.normal()))
     return {c: np.nanquantile(np.stack(v), quantiles, axis=0) for c, v in outputs.items()}
 
 
@@ -91,3 +93,42 @@ def coverage(bands: dict[str, dict[str, np.ndarray]], observed: dict[str, dict[s
             else:
                 outside.append((run, column))
     return {"inside": inside, "total": total, "share": inside / total if total else math.nan, "outside": outside}
+
+
+def layer_samples(layer: str, count: int, seed: int = 0) -> tuple[list[dict[str, float]], float]:
+    """(``count`` parameter draws, the discrepancy delta [-]) of the calibration layer named ``layer``
+    (data/calibration/<layer>.toml, written by ``settler calibrate --set``). Raises ValueError for a layer without
+    the hierarchy's provenance (a one-level layer such as ``paper`` records no covariance between its levels),
+    settler.cases.CaseError for a name that is not a layer."""
+    from settler.cases import calibration_path, read_calibration
+
+    read_calibration(layer)  # the clear error for a name that is not a layer
+    estimates, covariance, keys, delta = covariance_from_layer(calibration_path(layer))
+    return parameter_samples(estimates, covariance, keys, count, seed=seed), delta
+
+
+def sample_runs(case_file, layer: str, count: int, end_time: float, output_interval: float, seed: int = 0,
+                progress=None) -> tuple[list, float]:
+    """popbal's time series (pandas DataFrames, SI units) on the case ``case_file`` with the calibration layer
+    ``layer`` applied (``case.calibration = layer``: its [popbal] values replace the case's) and each of ``count``
+    parameter draws of :func:`layer_samples` on top, run to ``end_time`` [s] with rows every ``output_interval``
+    [s]; and the layer's discrepancy delta [-]. ``progress``: a callable of (done, total) or None."""
+    import popbal
+    from settler.cases import load_case
+
+    draws, delta = layer_samples(layer, count, seed)
+    series = []
+    for k, values in enumerate(draws):
+        overrides = {"case.calibration": layer, **{f"popbal.{key}": float(v) for key, v in values.items()},
+                     "popbal.end_time": float(end_time), "popbal.output_interval": float(output_interval)}
+        series.append(popbal.run(popbal.setup(load_case(case_file, overrides)), progress=False).timeseries)
+        if progress is not None:
+            progress(k + 1, count)
+    return series, delta
+
+
+def discrepancy_factors(count: int, columns, delta: float, seed: int = 0) -> dict[str, np.ndarray]:
+    """{column: (count,) factors exp(delta z)}, z ~ N(0, 1) per sample and column: the model discrepancy of
+    :func:`band`, one factor for a whole time series of a sample."""
+    rng = np.random.default_rng(seed + 1)
+    return {c: np.exp(delta * rng.normal(size=count)) for c in columns}
