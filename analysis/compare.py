@@ -294,6 +294,8 @@ def compare(full, reduced, windows=None) -> Comparison:
 #: Columns a band adds to the error table: the 5 %, 50 % and 95 % quantiles of the reduced window mean over the
 #: band's runs, and whether the full run's window mean lies inside the 90 % band.
 BAND_COLUMNS = ["band_low", "band_median", "band_high", "inside_band"]
+#: Columns that are shares of the matte fed, so at most 1 in a band.
+FRACTIONS = ("settled_fraction",)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -328,6 +330,8 @@ def prediction_band(comparison: Comparison, layer: str, samples: int = 20, seed:
     for column in comparison.compared:
         stack = np.stack([side_by_side(comparison.full.timeseries, s)[f"{column}_reduced"].to_numpy()
                           for s in series]) * factors[column][:, None]
+        if column in FRACTIONS:  # a share of the feed: the discrepancy cannot take it past 1
+            stack = np.minimum(stack, 1.0)
         with warnings.catch_warnings():  # rows where every run is NaN (before the first droplet) stay NaN
             warnings.simplefilter("ignore", RuntimeWarning)
             quantiles[column] = np.nanquantile(stack, QUANTILES, axis=0)

@@ -394,3 +394,87 @@ if not quick:
                                                 "trades a noisy column for steady ones." if better else ""))
 said.append(f"**Where the layer applies.** Presets that apply it: {listing(presets)}.")
 display(Markdown("\n\n".join(said)))
+
+# %% [markdown]
+# ## The hierarchical calibration against the designed set, and its prediction bands
+#
+# `data/calibration/designed.toml` is the layer of `settler calibrate --set data/calibration/holdouts.toml`
+# (`analysis.calibration`): the collision efficiency from the kernel run's merges alone, the plume coefficient and
+# return-flow ratio from the coalescence-off runs, the shear coefficient from the whole runs, each level with its
+# identifiability gate, and the hold-outs named in `holdouts.toml` before any fit scored only after every gate
+# passed. The hold-outs' 90 % prediction bands are popbal over the layer's parameter covariance with its log-normal
+# model discrepancy (`analysis.calibration.bands`); the check is the share of their window means inside. The layer
+# is read as committed (quick or not): the whole hierarchy takes about 47 minutes on 2 cores. No preset applies it.
+
+# %%
+from analysis.calibration.targets import TARGET_COLUMNS, load_target, seed_scatter
+
+designed_path = calibration_path("designed")
+designed = tomllib.loads(designed_path.read_text())
+dprov = designed["provenance"]
+print(f"layer {designed_path.name}: command {dprov['command']!r}; code {dprov['code_commit'][:10]}"
+      f"{' (tree dirty)' if dprov['code_tree_dirty'] else ''}; gate {'passed' if dprov['gate_passed'] else 'FAILED'}")
+level_rows = [{"level": "collision", "parameter": "collision_efficiency", "runs": "kernel",
+               "estimate": dprov["collision"]["efficiency"], "standard error": dprov["collision"]["standard_error"],
+               "profile 95 %": "–", "discrepancy": math.nan}]
+for level in ("transport", "whole"):
+    table = dprov[level]
+    for name in (k for k in table if isinstance(table[k], list) and f"correlation_{k}" in table):
+        estimate, se, low, high = table[name]
+        level_rows.append({"level": level, "parameter": name, "runs": ", ".join(table["runs"]), "estimate": estimate,
+                           "standard error": se, "profile 95 %": f"{low:.3g}-{high:.3g}",
+                           "discrepancy": table["discrepancy"]})
+pd.DataFrame(level_rows).style.format({"estimate": "{:.4g}", "standard error": "{:.3g}", "discrepancy": "{:.3g}"},
+                                      na_rep="–").hide(axis="index")
+
+# %%
+error_rows = []
+for level in ("transport", "whole", "holdouts"):
+    for key, values in dprov[level].items():
+        if key.startswith("error_"):
+            role = "held out" if level == "holdouts" else f"fitted ({level})"
+            limit = 0.2 if level == "holdouts" else 0.1
+            error_rows.append({"run": key[len("error_"):], "role": role,
+                               **{c: 100 * v for c, v in zip(TARGET_COLUMNS, values)},
+                               "within target": sum(abs(v) <= limit for v in values)})
+errors_designed = pd.DataFrame(error_rows)
+within = errors_designed.groupby(errors_designed["role"] == "held out")["within target"].sum()
+counts = errors_designed.groupby(errors_designed["role"] == "held out").size() * len(TARGET_COLUMNS)
+errors_designed.style.format({c: "{:+.1f}" for c in TARGET_COLUMNS}).hide(axis="index").set_caption(
+    "reduced / full - 1 [%] of the steady-window means; target: 10 % fitted, 20 % held out")
+
+# %%
+seed = seed_scatter(root)
+holdout_runs = [k[len("error_"):] for k in dprov["holdouts"] if k.startswith("error_")]
+fig = Figure(figsize=(10, 3.2 * len(holdout_runs) + 0.5), layout="constrained")
+axes = np.atleast_1d(fig.subplots(len(holdout_runs), 1, squeeze=False).ravel())
+inside, total = 0, 0
+for ax, run in zip(axes, holdout_runs):
+    observed = load_target(run, root, seed).means
+    for k, column in enumerate(TARGET_COLUMNS):
+        q = np.asarray(dprov["holdouts"][f"band_{run}_{column}"], dtype=float) / observed[column]
+        ax.plot([k, k], [q[0], q[2]], lw=8, alpha=0.35, color="C1", solid_capstyle="butt",
+                label="90 % band / full" if k == 0 else None)
+        ax.plot(k, q[1], "o", color="C1", label="band median / full" if k == 0 else None)
+        inside += int(q[0] <= 1.0 <= q[2])
+        total += 1
+    ax.axhline(1.0, color="C0", label="full run (window mean)")
+    ax.axhspan(0.8, 1.2, color="C0", alpha=0.08, label="the 20 % target")
+    ax.set_xticks(range(len(TARGET_COLUMNS)), [c.replace("_", " ") for c in TARGET_COLUMNS])
+    ax.set_yscale("log")
+    ax.set_ylabel("reduced / full")
+    ax.set_title(f"held out: {run}", fontsize="medium")
+    ax.grid(alpha=0.3, which="both")
+axes[0].legend(fontsize="small", ncol=2)
+show(fig)
+print(f"band coverage: {inside} of {total} held-out window means inside their 90 % bands "
+      f"(recorded in the layer: {dprov['holdouts'].get('band_coverage', math.nan):.3g}); an honest band holds about 90 %")
+
+# %%
+display(Markdown(
+    f"**What the designed calibration shows.** Every level passes the identifiability gate, and yet "
+    f"{int(within.get(False, 0))} of {int(counts.get(False, 0))} fitted window means are within 10 % and "
+    f"{int(within.get(True, 0))} of {int(counts.get(True, 0))} held-out ones within 20 %: the gate says the "
+    "parameters are determined, not that the model is right. The whole level absorbs a model discrepancy of "
+    f"{dprov['whole']['discrepancy']:.2g} (relative), which is what widens the bands. The closures are not yet the "
+    "ones the reference set asks for (docs/guide/reduced-model.md says what the set shows popbal lacks)."))
