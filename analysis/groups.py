@@ -44,14 +44,12 @@ UNITS = {"stokes_velocity": "m/s", "droplet_reynolds": "-", "feed_flux": "m/s", 
 
 
 def confinement_factor(column_to_core: float) -> float:
-    """c(R/a) = A0^2 / (4 Am) of the confined Stokes plume (module docstring) [-]; NaN for R/a <= 1."""
-    if not column_to_core > 1.0:
-        return math.nan
-    x = 1.0 / column_to_core
-    log = math.log(column_to_core)
-    a0 = 2.0 * log - 1.0 + x * x
-    am = 2.0 * log - 1.5 + 2.0 * x * x - 0.5 * x**4
-    return a0 * a0 / (4.0 * am)
+    """c(R/a) = A0^2 / (4 Am) of the confined Stokes plume (module docstring) [-]; NaN for R/a <= 1. The one
+    definition is popbal's closure (:func:`popbal.closures.confined_plume_coefficient`), which the reduced model
+    applies under ``popbal.confinement``."""
+    from popbal.closures import confined_plume_coefficient
+
+    return confined_plume_coefficient(column_to_core)
 
 
 def design_groups(case) -> dict[str, float]:

@@ -92,6 +92,27 @@ and of what leaves the channel's bottom a share min(1, U_h(d) / u_up) settles (t
 slag to reach the floor) and the rest enters the outer zone's bottom. Without it (r = 0) every droplet that reaches
 the channel's bottom settles, and popbal settles 2.7 times the coalescence-off demo's mass flux.
 
+Confinement (``confinement = true``; ``shared/reference/reduced-model.md`` section 2). A heavy core of radius a
+(the channel, a = R_c) in a closed column of radius R = sqrt(W D / pi) (the box's cross-section), unidirectional
+Stokes flow, zero net flux through every horizontal section and no slip at R, has the axis velocity
+w0 = (F / 4 pi mu) A0 and core-mean velocity (F / 4 pi mu) Am for the force F = pi a^2 phi drho g per unit height,
+A0 = 2 ln(R/a) - 1 + x^2, Am = 2 ln(R/a) - 3/2 + 2 x^2 - x^4 / 2, x = a / R; closing F with the core's matte flux
+gives w0 = sqrt(c Q drho g / (pi mu)) with c(R/a) = A0^2 / (4 Am) (:func:`confined_plume_coefficient`): the plume
+coefficient is a logarithm of the confinement, not a constant. The same solution gives the return flow: the slag
+turns upward at r_0, the root in (a, R) of (2 - x^2)(r_0^2 / R^2 - 1) / 2 = ln(r_0 / R) (about 0.46 R), and rises
+over r_0 < r < R at a mean velocity S(R/a) w0 (:func:`confined_return_share`; 0.053 at R/a = 10.8, 0.153 at 2.5). With
+``confinement`` the model takes u_s = sqrt(c_ch c(R/R_c) Q drho g / (pi mu)) and u_up = r S(R/R_c) u_s: c_ch
+(``channel_coefficient``) and r (``return_flow_ratio``) become multipliers of the laws, 1 where they hold as
+derived, so that a calibration measures how far the full engine's plume is from the confined Stokes plume. With the
+'flux' radius form R_c depends on u_s and u_s on R_c through c(R/R_c); :func:`confined_closure` solves the pair by
+fixed-point iteration (c varies as a logarithm, so it converges in a few steps). Measured against the
+coalescence-off runs (the transport level of ``settler calibrate --set`` with ``confinement = true``, k_R and E as in
+data/calibration/designed.toml, 2026-12-04): c_ch = 0.41 +- 0.11 and r = 0.71 +- 0.13 (correlation -0.45,
+discrepancy 0.19 against 0.21 with constants): the full engine's return flow is of the confined Stokes plume's
+size, its plume about sqrt(0.41) = 0.64 times as fast, and the two runs' errors (count +12 / -31 %, settling flux
+-29 / +4 %, axis velocity -21 / +5 %) are those of the constant closures, so the law does not yet explain why the
+deep family's plume is slower; the full runs' plume radius there is about one 5 mm cell (data/reference/README.md).
+
 Not modelled (calibration will tell whether they matter): the exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel, and, in the
 simple case's lower half, carries them out of the slag jet), the cloud's break-up, and inertia of the plume
 (Re > 1).
@@ -174,3 +195,71 @@ def settling_share(settling_velocity, upflow):
     if upflow <= 0.0:
         return np.ones_like(np.asarray(settling_velocity, dtype=float))
     return np.clip(np.asarray(settling_velocity, dtype=float) / upflow, 0.0, 1.0)
+
+
+def confined_axis_coefficient(column_to_core):
+    """A0 = 2 ln(R/a) - 1 + (a/R)^2 [-]: the confined Stokes plume's axis velocity over F / (4 pi mu) (module
+    docstring); NaN for R/a <= 1."""
+    if not column_to_core > 1.0:
+        return math.nan
+    x = 1.0 / column_to_core
+    return 2.0 * math.log(column_to_core) - 1.0 + x * x
+
+
+def confined_plume_coefficient(column_to_core):
+    """c(R/a) = A0^2 / (4 Am) [-] of the confined Stokes plume (module docstring): w0 = sqrt(c Q drho g / (pi mu));
+    NaN for R/a <= 1."""
+    if not column_to_core > 1.0:
+        return math.nan
+    x = 1.0 / column_to_core
+    a0 = confined_axis_coefficient(column_to_core)
+    am = 2.0 * math.log(column_to_core) - 1.5 + 2.0 * x * x - 0.5 * x**4
+    return a0 * a0 / (4.0 * am)
+
+
+def confined_return_radius(column_to_core):
+    """r_0 / R [-]: where the confined Stokes plume's slag turns from down to up, the root in (a/R, 1) of
+    h(y) = (2 - x^2)(y^2 - 1) / 2 - ln y (x = a / R); NaN for R/a <= 1."""
+    from scipy.optimize import brentq
+
+    if not column_to_core > 1.0:
+        return math.nan
+    x = 1.0 / column_to_core
+    k = 1.0 - 0.5 * x * x  # h(y) = k (y^2 - 1) - ln y, zero at y = 1 and at the root sought
+    lower = x if x > 1e-12 else 1e-12
+    upper = 1.0 / math.sqrt(2.0 * k)  # h has its minimum there, below zero; the root lies between
+    return brentq(lambda y: k * (y * y - 1.0) - math.log(y), lower, upper, xtol=1e-14) \
+        if k * (lower * lower - 1.0) - math.log(lower) > 0.0 else lower
+
+
+def confined_return_share(column_to_core):
+    """S(R/a) [-]: the confined Stokes plume's mean upflow over r_0 < r < R, over its axis velocity w0 (module
+    docstring); in units R = 1, F / mu = 1: G = (2 - x^2) / pi, the flux between r_0 = y R and R is
+    I = -G pi (1 - y^2)^2 / 8 + (1 - y^2) / 4 + y^2 ln(y) / 2 (negative: upward) over the area pi (1 - y^2), and
+    w0 = A0 / (4 pi). NaN for R/a <= 1."""
+    if not column_to_core > 1.0:
+        return math.nan
+    x = 1.0 / column_to_core
+    y = confined_return_radius(column_to_core)
+    g = (2.0 - x * x) / math.pi
+    flux = -g * math.pi * (1.0 - y * y) ** 2 / 8.0 + (1.0 - y * y) / 4.0 + 0.5 * y * y * math.log(y)
+    return -4.0 * flux / ((1.0 - y * y) * confined_axis_coefficient(column_to_core))
+
+
+def confined_closure(volume_flux, excess_density, viscosity, multiplier, column_radius, radius_of, iterations=200,
+                     tolerance=1e-12, gravity=STANDARD_GRAVITY):
+    """(u_s [m/s], R_c [m]) with u_s = sqrt(multiplier c(R/R_c) Q drho g / (pi mu)) and R_c = radius_of(u_s), R the
+    column radius [m], by fixed-point iteration from c = 1; ValueError if the channel reaches the column wall
+    (R_c >= R) or the iteration does not settle."""
+    coefficient = 1.0
+    for _ in range(iterations):
+        velocity = steady_channel_velocity(volume_flux, excess_density, viscosity, multiplier * coefficient, gravity)
+        radius = radius_of(velocity)
+        if not radius < column_radius:
+            raise ValueError(f"the channel (radius {radius:.4g} m) reaches the column's equivalent radius "
+                             f"{column_radius:.4g} m, where the confined plume has no return flow")
+        updated = confined_plume_coefficient(column_radius / radius) if radius > 0.0 else coefficient
+        if abs(updated - coefficient) <= tolerance * coefficient:
+            return velocity, radius
+        coefficient = updated
+    raise ValueError(f"the confined plume closure did not settle in {iterations} iterations")

@@ -223,6 +223,8 @@ def build(case: Case) -> Model:
     if ratio > 0.0 and (channel_area == 0.0 or zone_area[OUTER] <= 0.0):
         raise CaseError(f"popbal.return_flow_ratio = {ratio!r}: needs a channel zone inside the box "
                         "(popbal.channel_radius_factor > 0); allowed: 0 without one")
+    if p.confinement and ratio > 0.0:  # r multiplies the confined Stokes plume's return share S(R / R_c)
+        ratio *= closures.confined_return_share(column_radius(case) / channel_radius)
     return_velocity = closures.return_velocity(ratio, plume_velocity)
     return Model(case=case, grid=grid, cells=cells, cell_height=dz, z=z, zone_area=zone_area,
                  channel_radius=channel_radius, inlet_radius=inlet_radius, feed_density=case.matte.density,
@@ -235,22 +237,39 @@ def build(case: Case) -> Model:
                  parameters=parameters, return_velocity=return_velocity)
 
 
+def column_radius(case: Case) -> float:
+    """R = sqrt(W D / pi) [m]: the radius of the column with the box's cross-section (the confined plume's wall)."""
+    return math.sqrt(case.geometry.width * case.geometry.depth / math.pi)
+
+
 def channel_closure(case: Case) -> tuple[float, float, float, float]:
     """(R_c [m], u_s [m/s], Re [-], transport factor [-]) of the case's channel (popbal.closures).
 
     R_c: channel_radius_factor inlet radii ('inlet' form, the default) or channel_radius_factor sqrt(Q_ch / (pi u_s))
     ('flux'); u_s = sqrt(c_ch Q_ch drho g / (pi mu)) the steady plume velocity of the matte feed Q_ch [m^3/s] that
-    enters the channel; Re = rho_s u_s R_c / mu; transport factor 1 / (1 + Re / plume_reynolds_scale) (1 without).
+    enters the channel, with c_ch times the confined plume's c(R / R_c) under ``popbal.confinement`` (solved with
+    R_c by popbal.closures.confined_closure); Re = rho_s u_s R_c / mu; transport factor 1 / (1 + Re / plume_reynolds_scale) (1 without).
     """
     p, g = case.popbal, case.geometry
     volume_flux = case.feed.mass_rate * p.channel_feed_fraction / case.matte.density
     excess = case.matte.density - case.slag.density
-    velocity = closures.steady_channel_velocity(volume_flux, excess, case.slag_viscosity, p.channel_coefficient) \
-        if volume_flux > 0.0 and excess > 0.0 else 0.0
-    if p.channel_radius_form == "flux":
-        radius = closures.flux_channel_radius(volume_flux, velocity, p.channel_radius_factor)
+
+    def radius_of(velocity):
+        if p.channel_radius_form == "flux":
+            return closures.flux_channel_radius(volume_flux, velocity, p.channel_radius_factor)
+        return p.channel_radius_factor * 0.5 * g.inlet_diameter
+
+    if p.confinement and volume_flux > 0.0 and excess > 0.0 and p.channel_radius_factor > 0.0:
+        try:
+            velocity, radius = closures.confined_closure(volume_flux, excess, case.slag_viscosity,
+                                                         p.channel_coefficient, column_radius(case), radius_of)
+        except ValueError as exc:
+            raise CaseError(f"popbal.confinement = true: {exc}; allowed: a channel narrower than the box (a smaller "
+                            "popbal.channel_radius_factor), or confinement = false") from None
     else:
-        radius = p.channel_radius_factor * 0.5 * g.inlet_diameter
+        velocity = closures.steady_channel_velocity(volume_flux, excess, case.slag_viscosity, p.channel_coefficient) \
+            if volume_flux > 0.0 and excess > 0.0 else 0.0
+        radius = radius_of(velocity)
     reynolds = closures.plume_reynolds(velocity, radius, case.slag.density, case.slag_viscosity)
     return radius, velocity, reynolds, closures.transport_factor(reynolds, p.plume_reynolds_scale)
 

@@ -252,6 +252,12 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                            "channel's bottom a share min(1, U / u_up) settles (U their hindered "
                                            "settling velocity), the rest turning into the return flow "
                                            "(popbal.closures); absent or 0: no return flow.", 0.0, optional=True),
+        "confinement": Field(B, "", "true: the plume coefficient and the return flow follow the confined Stokes "
+                                    "plume of the channel (radius R_c) in the column of the box's cross-section "
+                                    "(radius R = sqrt(W D / pi)): u_s = sqrt(c_ch c(R/R_c) Q drho g / (pi mu)) and "
+                                    "u_up = r S(R/R_c) u_s, so channel_coefficient and return_flow_ratio become "
+                                    "multipliers of the laws (1: as derived; popbal.closures); absent or false: "
+                                    "constants.", optional=True),
     },
 }
 del F, I, B, S, L
