@@ -539,7 +539,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", default=None, metavar="REGISTRY",
                         help="the hierarchical calibration over a registry of levels and pre-registered hold-outs "
                              "(data/calibration/holdouts.toml); then only --write, --out, --overwrite, "
-                             "--reference-dir, --max-evaluations and --quiet apply (analysis.calibration)")
+                             "--reference-dir, --max-evaluations, --quiet, --leave-out and --band-samples apply "
+                             "(analysis.calibration)")
     parser.add_argument("--cases", default="simple",
                         help="comma-separated reference cases (folders of --reference-dir) to fit; default simple "
                              "(add cubic once data/reference/cubic exists)")
@@ -574,6 +575,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-evaluations", type=int, default=200,
                         help="largest number of reduced-model runs of the least-squares fit; default 200")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--leave-out", default=None, metavar="FAMILY",
+                        help="with --set: leave-one-family-out cross-validation, the registry's [families] FAMILY "
+                             "held out as well (fitted on the rest, scored with the hold-outs); not with --write")
+    parser.add_argument("--band-samples", type=int, default=20, metavar="N",
+                        help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
+                             "no bands, the errors only)")
 
 
 def main(args) -> int:

@@ -212,6 +212,35 @@ def test_settler_calibrate_set_refuses_a_registry_that_fits_a_holdout(tmp_path):
     assert "deep is a pre-registered hold-out" in done.stderr and "Traceback" not in done.stderr
 
 
+def test_leaving_a_family_out_holds_its_runs_out_of_every_level():
+    """Leave-one-family-out: the family's runs join the pre-registered hold-outs (with a reason) and leave every
+    level; the pre-registered ones stay; an unknown family is refused naming the allowed ones."""
+    from analysis.calibration.registry import leave_family_out
+
+    registry = load_registry()
+    left = leave_family_out(registry, "width")
+    assert left.holdouts == (*registry.holdouts, *registry.families["width"])
+    for level, runs in left.levels.items():
+        assert not set(runs) & set(registry.families["width"]), level
+        assert set(runs) == set(registry.levels[level]) - set(registry.families["width"])
+    assert all(left.why[r] for r in left.holdouts)
+    refuse_holdouts(left.levels["whole"], left)  # what is left may be fitted
+    with pytest.raises(RegistryError, match="--leave-out 'nope': .*allowed: feed, property, width"):
+        leave_family_out(registry, "nope")
+
+
+@pytest.mark.parametrize("extra, message", [(["--leave-out", "feed", "--write", "x.toml"], "not a calibration layer"),
+                                            (["--band-samples", "3"], "--band-samples 3: allowed 0"),
+                                            (["--leave-out", "nope"], "--leave-out 'nope': holdouts.toml has no")])
+def test_settler_calibrate_set_refuses_bad_cross_validation_options(extra, message):
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "settler", "calibrate", "--set", "data/calibration/holdouts.toml",
+                           *extra], capture_output=True, text=True)
+    assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
 @pytest.mark.slow
 def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command(tmp_path):
     """The committed hierarchical layer (data/calibration/designed.toml) comes back from the command in its

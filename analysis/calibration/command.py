@@ -8,24 +8,33 @@ from settler.output import OutputError, atomic_write_text, prepare_output_folder
 
 from .hierarchy import calibrate_set
 from .layer import write_layer
-from .registry import RegistryError, load_registry
+from .registry import RegistryError, leave_family_out, load_registry
 
 
 def run_set(args) -> int:
     """Run the hierarchy for parsed ``settler calibrate`` arguments; exit status 0 (2 via OutputError)."""
     if args.max_evaluations < 1:
         raise OutputError(f"--max-evaluations {args.max_evaluations!r}: allowed an integer >= 1")
+    leave_out = getattr(args, "leave_out", None)
+    samples = getattr(args, "band_samples", 20)
+    if samples < 0 or samples in (1, 2, 3, 4):
+        raise OutputError(f"--band-samples {samples!r}: allowed 0 (no bands) or an integer of at least 5")
+    if leave_out and args.write:
+        raise OutputError(f"--write {args.write} with --leave-out {leave_out}: a cross-validation fit leaves runs out "
+                          "on purpose and is not a calibration layer; allowed: --out DIR for its results")
     out = prepare_output_folder(args.out, overwrite=args.overwrite) if args.out else None
     try:
         registry = load_registry(args.set)
+        if leave_out:
+            registry = leave_family_out(registry, leave_out)
         result = calibrate_set(registry, args.reference_dir, max_evaluations=args.max_evaluations,
-                               progress=not args.quiet)
+                               progress=not args.quiet, band_samples=samples)
     except (RegistryError, FileNotFoundError) as exc:
         raise OutputError(str(exc)) from None
     text = result.summary()
     print(text)
     if out is not None:
-        data = {"collision": result.collision, "values": result.values, "radius_factor": result.radius_factor,
+        data = {"leave_out": leave_out, "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values, "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,
                 "coverage": result.coverage,
                 "levels": [{k: v for k, v in fit.__dict__.items()} for fit in result.levels]}

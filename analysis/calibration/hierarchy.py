@@ -87,6 +87,9 @@ class Hierarchy:
             lines.append("hold-outs (pre-registered, scored once):")
             lines += _error_rows(self.holdout_errors, TARGETS["holdout"])
             c = self.coverage
+            if c is None:
+                lines.append("  no prediction bands (--band-samples 0)")
+                return "\n".join(lines)
             lines.append(f"  90 % bands ({c['samples']} popbal runs each) hold {c['inside']} of {c['total']} hold-out "
                          f"window means ({c['share']:.0%})"
                          + (f"; outside: {', '.join(f'{r} {k}' for r, k in c['outside'])}" if c["outside"] else ""))
@@ -199,8 +202,12 @@ def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, sample
         case_file = Path(reference_dir) / run / "case.toml"
         means = reduced_means(target, case_file, {}, fixed)
         errors[run] = {c: means[c] / target.means[c] - 1.0 for c in TARGET_COLUMNS}
+        if samples == 0:
+            continue
         bands[run] = band(lambda v: reduced_means(target, case_file, v, fixed), draws, delta, seed=1)
         observed[run] = dict(target.means)
+    if samples == 0:
+        return errors, None
     result = coverage(bands, observed)
     result["bands"] = {run: {c: [float(x) for x in q] for c, q in b.items()} for run, b in bands.items()}
     result["samples"] = samples

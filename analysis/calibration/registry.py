@@ -68,3 +68,17 @@ def refuse_holdouts(names, registry: Registry | None = None, where: str = "the f
         raise RegistryError(f"{where}: {', '.join(used)} is a pre-registered hold-out ({registry.path.name}: "
                             f"{registry.why[used[0]].split(':')[0][:80]}...); allowed: runs not in "
                             f"{', '.join(registry.holdouts)}")
+
+
+def leave_family_out(registry: Registry, family: str) -> Registry:
+    """The registry with one of its [families] held out as well (leave-one-family-out cross-validation): the
+    family's runs join the hold-outs (scored only after the gate, as the pre-registered ones) and leave every level.
+    RegistryError for a family the registry does not name."""
+    if family not in registry.families:
+        raise RegistryError(f"--leave-out {family!r}: {registry.path.name} has no such family; allowed: "
+                            + ", ".join(registry.families))
+    runs = registry.families[family]
+    why = {**registry.why, **{r: f"left out with family {family!r} for cross-validation" for r in runs}}
+    levels = {k: tuple(r for r in v if r not in runs) for k, v in registry.levels.items()}
+    return Registry(holdouts=(*registry.holdouts, *runs), why=why, families=registry.families, levels=levels,
+                    path=registry.path)
