@@ -406,7 +406,8 @@ def layer_text(result: Calibration, command: str = "") -> str:
     today = datetime.date.today().isoformat()
     cases = ", ".join(result.cases)
     lines = ["# popbal's closures fitted to the full engine's reference runs by 'settler calibrate' (analysis/calibrate.py).",
-             "# Applied by case.calibration = \"<this file's name>\" over the property set and under the case file.",
+             "# Applied by case.calibration = \"<this file's name>\" over the property set and under the case file"
+             " (named by an override: over it).",
              f"# Fitted on {cases}; held out: {result.holdout or 'none'}. Standard errors from the Jacobian, s^2 (J^T J)^-1.",
              "", "[popbal]"]
     for name in result.parameters:

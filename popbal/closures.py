@@ -218,32 +218,40 @@ def confined_plume_coefficient(column_to_core):
 
 
 def confined_return_radius(column_to_core):
-    """r_0 / R [-]: where the confined Stokes plume's slag turns from down to up, the root in (a/R, 1) of
-    h(y) = (2 - x^2)(y^2 - 1) / 2 - ln y (x = a / R); NaN for R/a <= 1."""
+    """r_0 / R [-]: where the confined Stokes plume's slag turns from down to up (x = a / R). Outside the core it
+    is the root in (x, 1) of h(y) = (2 - x^2)(y^2 - 1) / 2 - ln y; when the slag already rises at the core's edge
+    (h(x) <= 0, R/a below about 1.78) the turn lies inside the core, on its parabolic profile, at
+    y^2 = A0 x^2 / (1 - x^2)^2. NaN for R/a <= 1."""
     from scipy.optimize import brentq
 
     if not column_to_core > 1.0:
         return math.nan
     x = 1.0 / column_to_core
     k = 1.0 - 0.5 * x * x  # h(y) = k (y^2 - 1) - ln y, zero at y = 1 and at the root sought
-    lower = x if x > 1e-12 else 1e-12
-    upper = 1.0 / math.sqrt(2.0 * k)  # h has its minimum there, below zero; the root lies between
-    return brentq(lambda y: k * (y * y - 1.0) - math.log(y), lower, upper, xtol=1e-14) \
-        if k * (lower * lower - 1.0) - math.log(lower) > 0.0 else lower
+    if k * (x * x - 1.0) - math.log(x) <= 0.0:  # the edge of the core already rises: the turn is inside it
+        return math.sqrt(confined_axis_coefficient(column_to_core) * x * x) / (1.0 - x * x)
+    upper = 1.0 / math.sqrt(2.0 * k)  # h has its minimum there, below zero; the root lies between x and it
+    return brentq(lambda y: k * (y * y - 1.0) - math.log(y), x, upper, xtol=1e-14)
 
 
 def confined_return_share(column_to_core):
     """S(R/a) [-]: the confined Stokes plume's mean upflow over r_0 < r < R, over its axis velocity w0 (module
-    docstring); in units R = 1, F / mu = 1: G = (2 - x^2) / pi, the flux between r_0 = y R and R is
-    I = -G pi (1 - y^2)^2 / 8 + (1 - y^2) / 4 + y^2 ln(y) / 2 (negative: upward) over the area pi (1 - y^2), and
-    w0 = A0 / (4 pi). NaN for R/a <= 1."""
+    docstring). In units R = 1, F / mu = 1 (x = a / R, y = r_0 / R): w0 = A0 / (4 pi), G = (2 - x^2) / pi; the
+    upward flux equals the downward flux through 0 < r < r_0, which for a turn outside the core is -I with
+    I = -G pi (1 - y^2)^2 / 8 + (1 - y^2) / 4 + y^2 ln(y) / 2 the flux between r_0 and R, and for a turn inside the
+    core pi w0 y^2 + pi (G - 1 / (pi x^2)) y^4 / 8 (the core's profile w0 + (G - 1 / (pi x^2)) r^2 / 4); the mean
+    upflow is that flux over pi (1 - y^2). NaN for R/a <= 1."""
     if not column_to_core > 1.0:
         return math.nan
     x = 1.0 / column_to_core
     y = confined_return_radius(column_to_core)
     g = (2.0 - x * x) / math.pi
-    flux = -g * math.pi * (1.0 - y * y) ** 2 / 8.0 + (1.0 - y * y) / 4.0 + 0.5 * y * y * math.log(y)
-    return -4.0 * flux / ((1.0 - y * y) * confined_axis_coefficient(column_to_core))
+    axis = confined_axis_coefficient(column_to_core) / (4.0 * math.pi)
+    if y <= x:
+        upward = math.pi * axis * y * y + math.pi * (g - 1.0 / (math.pi * x * x)) * y**4 / 8.0
+    else:
+        upward = g * math.pi * (1.0 - y * y) ** 2 / 8.0 - (1.0 - y * y) / 4.0 - 0.5 * y * y * math.log(y)
+    return upward / (math.pi * (1.0 - y * y)) / axis
 
 
 def confined_closure(volume_flux, excess_density, viscosity, multiplier, column_radius, radius_of, iterations=200,

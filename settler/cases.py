@@ -7,8 +7,11 @@ A case is resolved in layers, later ones winning:
 2. the *calibration layer* named by ``case.calibration`` (``data/calibration/<name>.toml``, written by ``settler
    calibrate``): popbal's closures fitted to the full engine's reference runs, with their provenance in a
    ``[provenance]`` table that is not merged; ``"none"``: no layer. A layer named by an *override*
-   (``case.calibration=NAME``) is applied after the case file instead, so that it replaces the file's values of the
-   keys it sets: that is how a run's resolved ``case.toml``, which spells out every key, takes a layer;
+   (``case.calibration=NAME`` or ``none``) is applied after the case file instead, so that it replaces the file's
+   values of the keys it sets, and the keys the file's own layer sets are dropped from the file first: that is how
+   a run's resolved ``case.toml``, which spells out every key, takes another layer or none, with the same result
+   as the preset given by name. Values an earlier override baked into a resolved file are replaced too where
+   either layer sets the key;
 3. the *case file* (``data/cases/<name>.toml`` or any path): geometry, feeds, size limit, submodel switches;
 4. *overrides* ``section.key=value`` from the command line or from :func:`load_case`'s ``overrides``.
 
@@ -457,6 +460,9 @@ def resolve(raw: dict, overrides=None, source: str = "") -> Case:
     layer_over_file = "case.calibration" in overrides
     if calibration is not None and calibration != NO_CALIBRATION and not layer_over_file:
         _merge(merged, read_calibration(calibration), f"calibration layer {calibration}")
+    file_layer = raw.get("case", {}).get("calibration")
+    if layer_over_file and file_layer not in (None, NO_CALIBRATION, calibration):
+        raw = _without_layer(raw, file_layer)  # the file's own layer gives way to the override's (or to none)
     _merge(merged, raw, source or "case")
     if calibration is not None and calibration != NO_CALIBRATION and layer_over_file:
         _merge(merged, read_calibration(calibration), f"calibration layer {calibration}")
@@ -467,6 +473,23 @@ def resolve(raw: dict, overrides=None, source: str = "") -> Case:
         _check_known(section, name, f"override {key}")
         merged.setdefault(section, {})[name] = value
     return _validate(merged, source)
+
+
+def _without_layer(raw: dict, layer: str) -> dict:
+    """``raw`` without the keys that calibration layer ``layer`` sets (in a run's resolved case.toml they came from
+    that layer, perhaps from an older version of it, so whatever their value), so that another layer, or none,
+    named by an override replaces the whole of it; ``raw`` unchanged if the layer no longer exists."""
+    try:
+        sections = read_calibration(layer)
+    except CaseError:
+        return raw
+    out = {name: dict(table) if isinstance(table, dict) else table for name, table in raw.items()}
+    for section, values in sections.items():
+        table = out.get(section)
+        if isinstance(table, dict):
+            for key, value in values.items():
+                table.pop(key, None)
+    return out
 
 
 #: Value of case.calibration that applies no layer (so an override can switch a preset's layer off).

@@ -200,6 +200,23 @@ def test_a_layer_named_by_an_override_replaces_a_resolved_case_files_values():
     assert beaten.popbal.shear_coefficient == 0.5
 
 
+def test_a_resolved_case_takes_another_layer_or_none_as_its_preset_does():
+    """simple's stored resolved case.toml names the 'paper' layer and spells out its values. With another layer
+    (or none) named by an override, every [popbal] key either layer sets comes out as for the preset given by name:
+    the paper layer's values (plume_reynolds_scale among them) do not survive into 'designed', nor into 'none'."""
+    resolved = REFERENCE_DIR / "simple" / "case.toml"
+    keys = set()
+    for name in ("paper", "designed"):
+        keys |= set(tomllib.loads(cases_module.calibration_path(name).read_text())["popbal"])
+    for layer in ("designed", "none"):
+        from_file = load_case(resolved, {"case.calibration": layer}).popbal
+        by_name = load_case("simple", {"case.calibration": layer}).popbal
+        for key in sorted(keys):
+            assert getattr(from_file, key) == getattr(by_name, key), (layer, key)
+    assert load_case(resolved, {"case.calibration": "none"}).popbal.collision_efficiency != \
+        load_case(resolved).popbal.collision_efficiency
+
+
 @pytest.mark.parametrize("preset", ["simple", "cubic"])
 def test_fitted_presets_are_calibrated_out_of_the_box(preset):
     """data/cases/simple.toml and cubic.toml (the fitted cases) name the 'paper' layer: its [popbal] values reach
