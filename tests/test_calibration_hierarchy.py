@@ -224,7 +224,13 @@ def test_leaving_a_family_out_holds_its_runs_out_of_every_level():
         assert not set(runs) & set(registry.families["width"]), level
         assert set(runs) == set(registry.levels[level]) - set(registry.families["width"])
     assert all(left.why[r] for r in left.holdouts)
+    assert "deep_w005_no_coalescence" not in left.levels["transport"]  # the family's coalescence-off variant too
     refuse_holdouts(left.levels["whole"], left)  # what is left may be fitted
+    import dataclasses
+
+    lone = dataclasses.replace(registry, families={**registry.families, "all": registry.levels["transport"]})
+    with pytest.raises(RegistryError, match="takes every run of level transport"):
+        leave_family_out(lone, "all")
     with pytest.raises(RegistryError, match="--leave-out 'nope': .*allowed: feed, property, width"):
         leave_family_out(registry, "nope")
 

@@ -27,6 +27,8 @@ def run_set(args) -> int:
         registry = load_registry(args.set)
         if leave_out:
             registry = leave_family_out(registry, leave_out)
+            print(f"calibrate: leaving out family {leave_out!r} ({', '.join(registry.families[leave_out])}): "
+                  "scored below with the pre-registered hold-outs")
         result = calibrate_set(registry, args.reference_dir, max_evaluations=args.max_evaluations,
                                progress=not args.quiet, band_samples=samples)
     except (RegistryError, FileNotFoundError) as exc:

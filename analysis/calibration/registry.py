@@ -72,13 +72,18 @@ def refuse_holdouts(names, registry: Registry | None = None, where: str = "the f
 
 def leave_family_out(registry: Registry, family: str) -> Registry:
     """The registry with one of its [families] held out as well (leave-one-family-out cross-validation): the
-    family's runs join the hold-outs (scored only after the gate, as the pre-registered ones) and leave every level.
-    RegistryError for a family the registry does not name."""
+    family's runs (its coalescence-off variants listed with it) join the hold-outs (scored only after the gate, as
+    the pre-registered ones) and leave every level. RegistryError for a family the registry does not name or one
+    that would empty a level."""
     if family not in registry.families:
         raise RegistryError(f"--leave-out {family!r}: {registry.path.name} has no such family; allowed: "
                             + ", ".join(registry.families))
     runs = registry.families[family]
     why = {**registry.why, **{r: f"left out with family {family!r} for cross-validation" for r in runs}}
     levels = {k: tuple(r for r in v if r not in runs) for k, v in registry.levels.items()}
+    emptied = [k for k, v in levels.items() if registry.levels[k] and not v]
+    if emptied:
+        raise RegistryError(f"--leave-out {family!r}: it takes every run of level {', '.join(emptied)} "
+                            f"({registry.path.name}); allowed: a family that leaves each level a run")
     return Registry(holdouts=(*registry.holdouts, *runs), why=why, families=registry.families, levels=levels,
                     path=registry.path)
