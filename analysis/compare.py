@@ -328,16 +328,16 @@ def prediction_band(comparison: Comparison, layer: str, samples: int = 20, seed:
     full_time = comparison.table["time"].to_numpy()
     quantiles, rows = {}, []
     for column in comparison.compared:
-        stack = np.stack([side_by_side(comparison.full.timeseries, s)[f"{column}_reduced"].to_numpy()
-                          for s in series]) * factors[column][:, None]
+        stack = np.stack([_on_times(comparison, s, column) for s in series]) * factors[column][:, None]
         if column in FRACTIONS:  # a share of the feed: the discrepancy cannot take it past 1
             stack = np.minimum(stack, 1.0)
         with warnings.catch_warnings():  # rows where every run is NaN (before the first droplet) stay NaN
             warnings.simplefilter("ignore", RuntimeWarning)
             quantiles[column] = np.nanquantile(stack, QUANTILES, axis=0)
         full = comparison.table[f"{column}_full"].to_numpy()
-        for window in comparison.windows:
-            inside = (full_time >= window.start) & (full_time <= window.end) & np.isfinite(full)
+        both = np.isfinite(full) & np.isfinite(comparison.table[f"{column}_reduced"].to_numpy())
+        for window in comparison.windows:  # the rows of the error definition: both runs finite (window_errors)
+            inside = (full_time >= window.start) & (full_time <= window.end) & both
             means = np.array([np.nanmean(row[inside]) if np.isfinite(row[inside]).any() else np.nan
                               for row in stack])
             low, median, high = (np.nanquantile(means, QUANTILES) if np.isfinite(means).any()
@@ -350,14 +350,24 @@ def prediction_band(comparison: Comparison, layer: str, samples: int = 20, seed:
                 windows=pd.DataFrame(rows, columns=["column", "window", *BAND_COLUMNS]))
 
 
+def _on_times(comparison: Comparison, series: pd.DataFrame, column: str) -> np.ndarray:
+    """A band run's ``column`` on the side-by-side table's times (NaN where the run has no row there)."""
+    table = side_by_side(comparison.full.timeseries, series)
+    return pd.Series(table[f"{column}_reduced"].to_numpy(), index=table["time"].to_numpy()) \
+        .reindex(comparison.table["time"].to_numpy()).to_numpy(dtype=float)
+
+
 def with_band(comparison: Comparison, band: Band) -> Comparison:
     """``comparison`` with ``band`` attached and its error table widened by :data:`BAND_COLUMNS`."""
     errors = comparison.errors.merge(band.windows, on=["column", "window"], how="left")
     return dataclasses.replace(comparison, band=band, errors=errors)
 
 
-def band_summary(band: Band, window: str = "steady") -> str:
-    """One line: how many of the full run's window means in ``window`` lie inside their 90 % band."""
+def band_summary(band: Band, window: str | None = None) -> str:
+    """One line: how many of the full run's window means in ``window`` (default ``steady``, else the last window)
+    lie inside their 90 % band."""
+    names = list(dict.fromkeys(band.windows["window"]))
+    window = window or ("steady" if "steady" in names else names[-1] if names else "steady")
     rows = band.windows[(band.windows["window"] == window) & band.windows["inside_band"].notna()]
     inside = int(rows["inside_band"].astype(bool).sum())
     outside = ", ".join(rows.loc[~rows["inside_band"].astype(bool), "column"])
@@ -459,8 +469,8 @@ def add_arguments(parser) -> None:
                              "with this calibration layer of 'settler calibrate --set' (a name in data/calibration/, "
                              "e.g. designed), its parameters drawn from the layer's estimates and covariance and its "
                              "model discrepancy added; errors.csv then says whether each full window mean lies inside")
-    parser.add_argument("--band-samples", metavar="N", type=int, default=20,
-                        help="popbal runs for the band (default 20; at least 5)")
+    parser.add_argument("--band-samples", metavar="N", type=int, default=None,
+                        help="popbal runs for the band (default 20; at least 5; only with --band)")
 
 
 def write_outputs(comparison: Comparison, out: Path, command_line: str | None = None) -> dict[str, Path]:
@@ -475,8 +485,10 @@ def write_outputs(comparison: Comparison, out: Path, command_line: str | None = 
                 units[f"{column}_{name}"] = COLUMNS[column][0]
     atomic_write_text(paths["comparison.csv"], "# units: " + ", ".join(f"{c} [{u}]" for c, u in units.items())
                       + "\n" + table.to_csv(index=False))
+    band_units = (", band_low, band_median and band_high [unit of the column], inside_band [true/false]"
+                  if comparison.band is not None else "")
     atomic_write_text(paths["errors.csv"], "# units: start [s], end [s], points [-], mean_full and mean_reduced "
-                      "[unit of the column, comparison.json], relative_error [-]\n"
+                      "[unit of the column, comparison.json], relative_error [-]" + band_units + "\n"
                       + comparison.errors.to_csv(index=False))
     fig = comparison_figure(comparison)
     buffer = io.BytesIO()
@@ -524,9 +536,11 @@ def main(args) -> int:
     """``settler compare FULL REDUCED --out DIR [--windows LIST]``: 0 done; OutputError (exit 2 through settler.cli)
     for a folder that is not a run, bad windows or an unusable output folder."""
     prepare_output_folder(args.out, option="--out", create=False)  # refuse a bad --out before the work
+    if args.band_samples is not None and args.band is None:
+        raise OutputError(f"--band-samples {args.band_samples}: only with --band LAYER (the band it sizes)")
     comparison = compare(args.full, args.reduced, windows=args.windows)
     if args.band is not None:
-        comparison = _add_band(comparison, args.band, args.band_samples)
+        comparison = _add_band(comparison, args.band, args.band_samples or 20)
     for run, wanted in ((comparison.full, "fulldem"), (comparison.reduced, "popbal")):
         if run.engine != wanted:
             print(f"settler compare: warning: {run.folder} was made by {run.engine or 'an unknown engine'}, "
@@ -556,9 +570,11 @@ def _add_band(comparison: Comparison, layer: str, samples: int) -> Comparison:
     bar = tqdm(total=samples, desc="band", unit="run", file=sys.stderr, disable=None)
     try:
         band = prediction_band(comparison, layer, samples, progress=lambda done, total: bar.update(1))
-    except (ValueError, CaseError) as exc:
+    except ValueError as exc:
         raise OutputError(f"--band {layer}: {exc}; allowed: a layer written by 'settler calibrate --set' "
                           "(e.g. designed)") from None
+    except CaseError as exc:
+        raise OutputError(f"--band {layer}: {exc}") from None
     finally:
         bar.close()
     return with_band(comparison, band)

@@ -256,7 +256,8 @@ def test_band_command_writes_the_band_and_refuses_a_layer_without_covariance(tmp
     assert json.loads((out / "comparison.json").read_text())["band"]["layer"] == "certain"
     for args, what in ((["--band", "paper"], "--band paper: .*no \\[provenance.collision\\]"),
                        (["--band", "missing"], "--band missing: .*no calibration layer"),
-                       (["--band", certain_layer, "--band-samples", "3"], "--band-samples 3: allowed")):
+                       (["--band", certain_layer, "--band-samples", "3"], "--band-samples 3: allowed"),
+                       (["--band-samples", "10"], "--band-samples 10: only with --band")):
         assert main(["compare", REFERENCE, str(reduced_deep), "--out", str(tmp_path / "o"), *args]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and re.search(what, err), err

@@ -166,6 +166,27 @@ def test_layer_records_the_levels_without_machine_paths_and_bands_read_its_covar
     assert covariance[0, 1] == 0.0 and delta == fit.discrepancy
 
 
+def test_holdouts_scored_without_bands_are_summarised_and_written(tmp_path, monkeypatch):
+    """--band-samples 0: the hold-outs' errors without bands. The summary says so, the layer records the errors
+    and no coverage, and it stays valid TOML."""
+    import dataclasses
+    import tomllib
+
+    from analysis.calibration.layer import write_layer
+
+    truth = {"channel_coefficient": 0.4, "shear_coefficient": 1.5}
+    targets = _targets(_linear, truth, COVARIATES, np.random.default_rng(1))
+    fit = fit_level("whole", targets, {}, list(truth), {"channel_coefficient": 1.0, "shear_coefficient": 1.0},
+                    model=_linear, progress=False, profile=False)
+    errors = {"deep": dict.fromkeys(TARGET_COLUMNS, 0.5)}
+    result = dataclasses.replace(_hierarchy(fit), holdout_errors=errors, gate_passed=True, coverage=None)
+    assert "no prediction bands (--band-samples 0)" in result.summary()
+    monkeypatch.chdir(tmp_path)
+    layer = tomllib.loads(write_layer(result, tmp_path / "layer.toml", tmp_path / "h.toml").read_text())
+    assert layer["provenance"]["holdouts"]["error_deep"] == [0.5] * len(TARGET_COLUMNS)
+    assert "band_coverage" not in layer["provenance"]["holdouts"]
+
+
 def test_band_of_a_linear_prediction_matches_its_analytic_spread_and_covers_ninety_percent():
     """y = a x1 + b x2 with (a, b) ~ N(m, C): the 90 % band is y_mean +- 1.645 sqrt(g C g) (g = (x1, x2)); of
     400 draws of y from that distribution, 90 % +- 4 % lie inside the band (binomial sd 1.5 %)."""

@@ -103,18 +103,20 @@ def banded_trends(base_overrides: dict, axes: dict, points: int, layer: str = "d
 def trend_ratios(table: pd.DataFrame) -> pd.DataFrame:
     """Per key of a :func:`banded_trends` table, the loss at the high end of its range over the loss at the low
     end, draw by draw (the discrepancy factor, common to both ends, cancels): the 5/50/95 % of that ratio and
-    ``resolved``, whether its 90 % interval excludes 1 (the model says which way the key moves the loss, whatever
-    the discrepancy does to the level)."""
+    ``resolved``, whether its 90 % interval excludes 1: the direction is resolved *under a common discrepancy*,
+    i.e. if the model's error is the same factor all along the curve (what is left is the parameters' spread).
+    A loss of 0 at either end leaves the ratio undefined: NaN quantiles and ``resolved`` False."""
     from analysis.calibration.bands import QUANTILES
 
     rows = []
     for key, group in table.groupby("key", sort=False):
         group = group.sort_values("value")
-        ratio = np.asarray(group["losses"].iloc[-1]) / np.asarray(group["losses"].iloc[0])
-        low, median, high = np.quantile(ratio, QUANTILES)
+        first, last = np.asarray(group["losses"].iloc[0]), np.asarray(group["losses"].iloc[-1])
+        defined = (first > 0.0) & (last > 0.0) & np.isfinite(first) & np.isfinite(last)
+        low, median, high = (np.quantile(last / first, QUANTILES) if defined.all() else (np.nan,) * 3)
         rows.append({"key": key, "low": float(group["value"].iloc[0]), "high": float(group["value"].iloc[-1]),
                      "ratio_low": low, "ratio_median": median, "ratio_high": high,
-                     "resolved": bool(high < 1.0 or low > 1.0)})
+                     "resolved": bool(math.isfinite(low) and (high < 1.0 or low > 1.0))})
     return pd.DataFrame(rows)
 
 
