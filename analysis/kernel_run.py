@@ -123,8 +123,18 @@ def kernel_exposure(run_folder, diameter_small: float = 0.5e-3, diameter_large: 
     return frame, int(pair["merges"].sum()), {"small": small, "large": large}
 
 
+def fed_sizes(droplets_csv) -> tuple[float, float]:
+    """(small, large) diameter [m] of a kernel run's initial droplet list (x, y, z, diameter rows with a header):
+    its two distinct diameters; ValueError if it holds another number of sizes."""
+    diameters = np.unique(pd.read_csv(droplets_csv, comment="#")["diameter"].to_numpy(dtype=float))
+    if diameters.size != 2:
+        raise ValueError(f"{droplets_csv}: {diameters.size} droplet sizes; a kernel run has two")
+    return float(diameters[0]), float(diameters[1])
+
+
 def write_kernel_exposure(run_folder, dest, diameter_small: float = 0.5e-3, diameter_large: float = 1.0e-3) -> Path:
-    """Write :data:`EXPOSURE_FILE` of the kernel run folder ``run_folder`` into the folder ``dest`` (atomically)."""
+    """Write :data:`EXPOSURE_FILE` of the kernel run folder ``run_folder`` into the folder ``dest`` (atomically),
+    for the fed sizes ``diameter_small`` and ``diameter_large`` [m], which its header records."""
     from settler.output import atomic_write_text, units_line
 
     frame, merges, bins = kernel_exposure(run_folder, diameter_small, diameter_large)
@@ -137,14 +147,15 @@ def write_kernel_exposure(run_folder, dest, diameter_small: float = 0.5e-3, diam
     return path
 
 
-def kernel_run_efficiency(run_folder, diameter_small: float = 0.5e-3, diameter_large: float = 1.0e-3,
+def kernel_run_efficiency(run_folder, diameter_small: float | None = None, diameter_large: float | None = None,
                           slice_height: float | None = None) -> dict:
     """The collision efficiency of a kernel run (two sizes settling without feed; the reference set's 'kernel'):
     the merges between the bins of the two fed sizes (``merges_by_size.csv``) over the gravitational collisions of
     :func:`collision_efficiency`, with the exposure and velocities from every droplet snapshot of the run folder,
     or from its :data:`EXPOSURE_FILE` where the folder is a stored reference (each size counted within its
-    merges-by-size bin; slices of one cell height unless ``slice_height`` [m]).
-    Returns the result of :func:`collision_efficiency` plus "bins" and "snapshots"."""
+    merges-by-size bin; slices of one cell height unless ``slice_height`` [m]). The fed sizes: as given, else the
+    sizes the stored file's header records, else 0.5 and 1.0 mm (the 'kernel' run's).
+    Returns the result of :func:`collision_efficiency` plus "bins", "snapshots" and "sizes"."""
     stored = Path(run_folder) / EXPOSURE_FILE
     if stored.is_file() and slice_height is None:
         frame = pd.read_csv(stored, comment="#")
@@ -152,11 +163,17 @@ def kernel_run_efficiency(run_folder, diameter_small: float = 0.5e-3, diameter_l
         numbers = re.findall(r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?", head[0].split(":", 1)[1])
         merges = int(numbers[0])
         bins = {"small": (float(numbers[1]), float(numbers[2])), "large": (float(numbers[3]), float(numbers[4]))}
+        if diameter_small is None and len(numbers) >= 7:  # "...; sizes A and B m"
+            diameter_small, diameter_large = float(numbers[5]), float(numbers[6])
     else:
+        diameter_small = 0.5e-3 if diameter_small is None else diameter_small
+        diameter_large = 1.0e-3 if diameter_large is None else diameter_large
         frame, merges, bins = kernel_exposure(run_folder, diameter_small, diameter_large, slice_height)
     exposure = {"times": frame["time"].to_numpy(), "exposure": frame["exposure"].to_numpy(),
                 "velocity_small": frame["velocity_small"].to_numpy(),
                 "velocity_large": frame["velocity_large"].to_numpy()}
+    diameter_small = 0.5e-3 if diameter_small is None else diameter_small
+    diameter_large = 1.0e-3 if diameter_large is None else diameter_large
     result = collision_efficiency(merges, exposure, diameter_small, diameter_large)
-    result.update(bins=bins, snapshots=len(frame))
+    result.update(bins=bins, snapshots=len(frame), sizes=(diameter_small, diameter_large))
     return result

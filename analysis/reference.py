@@ -554,9 +554,10 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
         results[run.name] = store_reference(folder, run.name, dest_root=dest_root, snapshots=snapshots,
                                             command=command)
         if run.family == "kernel":  # E needs every snapshot's exposure; the reference keeps a few snapshots
-            from analysis.kernel_run import write_kernel_exposure
+            from analysis.kernel_run import fed_sizes, write_kernel_exposure
 
-            write_kernel_exposure(folder, results[run.name])
+            sizes = fed_sizes(run.droplets) if run.droplets else (0.5e-3, 1.0e-3)
+            write_kernel_exposure(folder, results[run.name], *sizes)
     return results
 
 
