@@ -78,3 +78,22 @@ def test_collision_efficiency_counts_droplets_placed_at_rest_at_their_terminal_v
     result = collision_efficiency(100, exposure, ds, dl)
     assert result["expected_collisions"] == pytest.approx(expected, rel=1e-12)
     assert result["quadrature_error"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_stored_kernel_runs_give_their_efficiency_at_their_own_sizes():
+    """Each stored kernel run's efficiency is computed at the sizes its exposure file records (0.5/1.0 mm and
+    0.35/1.4 mm), equal to the efficiency with those sizes given; the velocity difference of the pair is within 25 %
+    of the Stokes difference of the two sizes in the demo's slag (hindered and wall-slowed, never faster)."""
+    from analysis.kernel_run import kernel_run_efficiency
+    from settler.cases import DATA_DIR, load_case
+    from settler.physics import STANDARD_GRAVITY
+
+    for run, sizes in (("kernel", (0.5e-3, 1.0e-3)), ("kernel_ratio4", (0.35e-3, 1.4e-3))):
+        folder = DATA_DIR / "reference" / run
+        read = kernel_run_efficiency(folder)
+        given = kernel_run_efficiency(folder, *sizes)
+        assert read["sizes"] == pytest.approx(sizes) and read["efficiency"] == pytest.approx(given["efficiency"])
+        case = load_case(folder / "case.toml")
+        drho = case.matte.density - case.slag.density
+        stokes = drho * STANDARD_GRAVITY * (sizes[1] ** 2 - sizes[0] ** 2) / (18.0 * case.slag_viscosity)
+        assert 0.75 * stokes < read["velocity_difference"] <= 1.02 * stokes, (run, read["velocity_difference"], stokes)
