@@ -327,8 +327,9 @@ def prediction_band(comparison: Comparison, layer: str, samples: int = 20, seed:
     factors = discrepancy_factors(samples, comparison.compared, delta, seed)
     full_time = comparison.table["time"].to_numpy()
     quantiles, rows = {}, []
+    tables = [_on_times(comparison, s) for s in series]  # one side-by-side table per band run, not per column
     for column in comparison.compared:
-        stack = np.stack([_on_times(comparison, s, column) for s in series]) * factors[column][:, None]
+        stack = np.stack([t[f"{column}_reduced"].to_numpy(dtype=float) for t in tables]) * factors[column][:, None]
         if column in FRACTIONS:  # a share of the feed: the discrepancy cannot take it past 1
             stack = np.minimum(stack, 1.0)
         with warnings.catch_warnings():  # rows where every run is NaN (before the first droplet) stay NaN
@@ -350,11 +351,10 @@ def prediction_band(comparison: Comparison, layer: str, samples: int = 20, seed:
                 windows=pd.DataFrame(rows, columns=["column", "window", *BAND_COLUMNS]))
 
 
-def _on_times(comparison: Comparison, series: pd.DataFrame, column: str) -> np.ndarray:
-    """A band run's ``column`` on the side-by-side table's times (NaN where the run has no row there)."""
-    table = side_by_side(comparison.full.timeseries, series)
-    return pd.Series(table[f"{column}_reduced"].to_numpy(), index=table["time"].to_numpy()) \
-        .reindex(comparison.table["time"].to_numpy()).to_numpy(dtype=float)
+def _on_times(comparison: Comparison, series: pd.DataFrame) -> pd.DataFrame:
+    """A band run's side-by-side table on the comparison table's times (NaN rows where the run has none)."""
+    table = side_by_side(comparison.full.timeseries, series).set_index("time")
+    return table.reindex(comparison.table["time"].to_numpy())
 
 
 def with_band(comparison: Comparison, band: Band) -> Comparison:

@@ -61,7 +61,9 @@ def design_groups(case) -> dict[str, float]:
     u_s = drho * g * d * d / (18.0 * mu)
     a = 0.5 * case.geometry.inlet_diameter
     q = case.feed.mass_rate / rho_m
-    radius = math.sqrt(case.geometry.width * case.geometry.depth / math.pi)
+    from popbal.model import column_radius
+
+    radius = column_radius(case)
     flux = q / (math.pi * a * a) if a > 0.0 else math.nan
     c = confinement_factor(radius / a) if a > 0.0 else math.nan
     w0 = math.sqrt(c * q * drho * g / (math.pi * mu)) if q > 0.0 else 0.0
@@ -81,7 +83,9 @@ def measured_groups(timeseries, case) -> dict[str, float]:
     w0 = float(late["channel_velocity"].mean())
     mu, rho_s, rho_m = case.slag_viscosity, case.slag.density, case.matte.density
     q = case.feed.mass_rate / rho_m
-    radius = math.sqrt(case.geometry.width * case.geometry.depth / math.pi)
+    from popbal.model import column_radius
+
+    radius = column_radius(case)
     scale = math.sqrt(q * (rho_m - rho_s) * STANDARD_GRAVITY / (math.pi * mu)) if q > 0.0 else math.nan
     return {"channel_radius": a, "channel_velocity": w0, "column_to_channel": radius / a if a > 0 else math.nan,
             "channel_reynolds": rho_s * w0 * a / mu, "sqrt_c": w0 / scale if scale > 0 else math.nan}

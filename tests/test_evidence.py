@@ -86,7 +86,7 @@ def test_stored_kernel_runs_give_their_efficiency_at_their_own_sizes():
     of the Stokes difference of the two sizes in the demo's slag (hindered and wall-slowed, never faster)."""
     from analysis.kernel_run import kernel_run_efficiency
     from settler.cases import DATA_DIR, load_case
-    from settler.physics import STANDARD_GRAVITY
+    from settler.physics import stokes_velocity
 
     for run, sizes in (("kernel", (0.5e-3, 1.0e-3)), ("kernel_ratio4", (0.35e-3, 1.4e-3))):
         folder = DATA_DIR / "reference" / run
@@ -94,6 +94,6 @@ def test_stored_kernel_runs_give_their_efficiency_at_their_own_sizes():
         given = kernel_run_efficiency(folder, *sizes)
         assert read["sizes"] == pytest.approx(sizes) and read["efficiency"] == pytest.approx(given["efficiency"])
         case = load_case(folder / "case.toml")
-        drho = case.matte.density - case.slag.density
-        stokes = drho * STANDARD_GRAVITY * (sizes[1] ** 2 - sizes[0] ** 2) / (18.0 * case.slag_viscosity)
+        stokes = (stokes_velocity(sizes[1], case.matte.density, case.slag.density, case.slag_viscosity)
+                  - stokes_velocity(sizes[0], case.matte.density, case.slag.density, case.slag_viscosity))
         assert 0.75 * stokes < read["velocity_difference"] <= 1.02 * stokes, (run, read["velocity_difference"], stokes)

@@ -48,11 +48,12 @@ def entrained_copper(matte_loss, matte_rate: float, slag_rate: float, grade: flo
 
 
 def _loss(case) -> float:
-    """popbal's matte loss [-] of a case: mass_lost / mass_fed at its last output."""
+    """popbal's matte loss [-] of a case: the sweeps' matte_loss (mass_lost / mass_fed at the last output)."""
     import popbal
 
-    last = popbal.run(popbal.setup(case), progress=False).timeseries.iloc[-1]
-    return float(last["mass_lost"] / last["mass_fed"])
+    from .execution import summarize
+
+    return summarize(popbal.run(popbal.setup(case), progress=False).timeseries)["matte_loss"]
 
 
 def loss_band(overrides: dict, layer: str = "designed", samples: int = 20, seed: int = 0, base: str = "furnace",
