@@ -113,6 +113,42 @@ size, its plume about sqrt(0.41) = 0.64 times as fast, and the two runs' errors 
 -29 / +4 %, axis velocity -21 / +5 %) are those of the constant closures, so the law does not yet explain why the
 deep family's plume is slower; the full runs' plume radius there is about one 5 mm cell (data/reference/README.md).
 
+Roof layer (``roof_layer_coefficient`` c_L, ``roof_thickness`` delta; zone "roof"). In the full runs about half of
+the demo family's droplets sit in the top 10 mm, under the inlet (data/reference/<run>/zones.csv: the roof layer's
+volume fraction 0.019, 0.029 and 0.044 at 0.5, 1 and 2 times the demo's feed, 0.021 and 0.040 at half and twice the
+viscosity, one 5 mm cell thick), where the channel's own feed layer (above) puts them in the top cells of a channel
+a few millimetres wide. The roof layer is a separate well-mixed compartment of the inlet disk's area A_L and
+thickness delta: it takes the channel's share of the feed and, with a bottom layer or a return flow, the droplets
+that rise back to the roof, and drains into the channel's top cell at u_L = c_L phi drho g delta^2 / mu (the
+cloud law of a slab, as the feed layer's) plus the droplets' own hindered settling. Fed at the volume flux density
+j = Q / A_L it holds phi = j / u_L, i.e. a matte volume per unit area
+
+    I = phi delta = sqrt(j mu / (c_L drho g))   (:func:`roof_inventory`; dilute, own settling neglected),
+
+independent of delta. The demo family follows it: I grows as Q^0.61 and mu^0.47 against the law's 0.5 and 0.5,
+and c_L = j mu / (drho g I^2) (:func:`roof_coefficient`) is 0.093-0.127 over the five runs. Across geometries it is
+not one constant: 0.034 and 0.043 in simple and cubic, 0.014 and 0.058 in deep's 50 and 20 mm columns (where the
+"roof" is the 25-31 mm over which the plume accelerates), and 0.044 in the demo at 2.5 mm cells against 0.108 at
+5 mm: the roof is one cell thick in the demo family and not resolved there. ``settler calibrate --set --closures
+layers`` takes c_L as the geometric mean over the transport runs and delta as their mean thickness.
+
+Bottom layer (``bottom_layer_factor`` f_b; zone "bottom"). The full runs hold matte just above the floor (demo:
+volume fraction 5.8e-3 in the bottom 10 mm against 1e-3 over mid-height; without coalescence 40e-3, 82 000 of 107
+000 droplets within 20 mm of the floor), and almost none of it returns with the slag: the upward droplet flux below
+the feed layer (lift_by_size.csv, rising count x rising velocity / height) is 0.2-0.6 % of the fed number rate in
+the demo family, 2-4 % in simple and cubic, 0.7 % in deep's coalescence-off run, where the return-flow closure
+above turns 1 - U / u_up (about 90 % for the fed sizes) of what reaches the channel's bottom. The bottom layer is
+a well-mixed compartment over the whole floor, h_b = f_b R_c thick (the plume's discharge spreads about one plume
+radius deep; f_b = 1 as derived), that takes everything leaving the channel's and the outer zone's bottom and
+drops it on the floor at the droplets' own hindered settling velocity, merging them at its own volume fraction,
+with differential settling and the shear G = shear_coefficient u_c / h_b of the plume turning over it. Its steady
+state holds phi_b U_h(phi_b) = Q / A_box, which has a solution only below the largest hindered settling flux
+max phi U (1 - phi)^n of the droplets (0.029 mm/s for the demo's fresh 0.5 mm matte against its 0.048 mm/s feed
+flux): above it the layer fills, as a settling bed would, until coalescence makes its droplets fast enough.
+
+Both layers integrate dc/dt = inflow - (v / h) c exactly over a step (popbal.driver), so their steady states hold
+whatever the step; tests/test_popbal_layers.py checks both against their closed forms.
+
 Not modelled (calibration will tell whether they matter): the exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel, and, in the
 simple case's lower half, carries them out of the slag jet), the cloud's break-up, and inertia of the plume
 (Re > 1).
@@ -170,6 +206,19 @@ def cloud_profile(z, height, channel_radius, channel_coefficient, layer_thicknes
         coefficient[layer] = layer_coefficient
         radius[layer] = layer_thickness
     return coefficient, radius
+
+
+def roof_inventory(volume_flux_density, excess_density, viscosity, coefficient, gravity=STANDARD_GRAVITY):
+    """Steady matte volume per unit area I = phi delta = sqrt(j mu / (c_L drho g)) [m] of a roof layer fed at the
+    volume flux density j [m/s] that drains at u_L = c_L phi drho g delta^2 / mu (module docstring): independent
+    of the thickness delta."""
+    return math.sqrt(volume_flux_density * viscosity / (coefficient * excess_density * gravity))
+
+
+def roof_coefficient(volume_flux_density, inventory, excess_density, viscosity, gravity=STANDARD_GRAVITY):
+    """c_L = j mu / (drho g I^2) [-]: the roof law's coefficient that holds the measured matte volume per unit area
+    I [m] at the feed flux density j [m/s] (the inverse of :func:`roof_inventory`)."""
+    return volume_flux_density * viscosity / (excess_density * gravity * inventory * inventory)
 
 
 def flux_channel_radius(volume_flux, velocity, radius_factor):

@@ -41,13 +41,14 @@ from . import limits
 from .closures import settling_share
 from .kernels import (AGE, FES_REMOVED, NEGLIGIBLE_VOLUME_FRACTION, NUMBER, QUANTITIES, cell_properties,
                       coalesce_zone, react_zone, transport_two_way, transport_zone)
-from .model import CHANNEL, OUTER, ZONES, Model, setup
+from .model import BOTTOM, CHANNEL, OUTER, ROOF, ZONES, Model, setup
 
 #: Arrays of distribution.npz: name -> (unit, meaning). T outputs, Z = 2 zones, J cells, K sections.
 DISTRIBUTION_ARRAYS: dict[str, tuple[str, str]] = {
     "time": ("s", "(T,) output times"),
     "z": ("m", "(J,) cell-centre heights above the bottom of the slag"),
-    "zone_area": ("m^2", "(Z,) horizontal area of the channel and outer zones"),
+    "zone_area": ("m^2", "(Z,) horizontal area of the channel and outer zones; the roof layer's volume per cell height "
+                         "(its one top cell holds the layer; 0: no roof layer)"),
     "original_volume": ("m^3", "(K,) pivot volumes of the sections (droplet volume at the feed composition)"),
     "original_diameter": ("m", "(K,) pivot diameters of the sections at the feed composition"),
     "number_density": ("1/m^3", "(T, Z, J, K) droplets per m^3 of slag"),
@@ -163,22 +164,29 @@ class _Work:
         self.turned = np.zeros((QUANTITIES, sections))
         self.top_out = np.zeros((QUANTITIES, sections))
         self.rows = np.zeros((3, cells))
+        self.into_bottom = np.zeros((QUANTITIES, sections))  # what reached the bottom layer in the step [absolute]
+        self.roof_out = np.zeros((QUANTITIES, sections))  # what drained from the roof layer during the step [absolute]
 
 
 def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
     p = model.parameters
-    channel = zone == CHANNEL
+    coefficient, radius = {CHANNEL: (model.cloud_coefficient, model.cloud_radius),
+                           ROOF: (model.roof_coefficient, model.roof_radius)}.get(zone, (work.no_cloud, work.no_cloud))
     cell_properties(content[zone], model.grid.pivots, model.grid.diameters, model.reacting, model.x_initial,
                     model.x_final, model.time_constant, model.velocity_table, model.age_step,
                     p["hindered_exponent"], model.feed_density, p["density_slag"], model.viscosity, model.gravity,
-                    model.cloud_coefficient if channel else work.no_cloud, model.cloud_radius if channel else
-                    work.no_cloud, model.downflow, work.diameters[zone], work.densities[zone], work.velocities[zone],
-                    work.volume_fraction[zone], work.collective[zone])
-    if not channel and model.return_velocity > 0.0:
+                    coefficient, radius, model.downflow, work.diameters[zone], work.densities[zone],
+                    work.velocities[zone], work.volume_fraction[zone], work.collective[zone])
+    if zone == OUTER and model.return_velocity > 0.0:
         work.velocities[zone] -= model.return_velocity  # the slag rises at u_up outside the plume
-    if channel and model.channel_radius > 0.0:
-        # G = shear_coefficient u / R with the cell's cloud scale (R_c in the plume, delta in the feed layer)
-        work.shear[zone] = p["shear_coefficient"] * work.collective[zone] / model.cloud_radius
+    if zone == BOTTOM:  # the plume turns over the layer's thickness: G = shear_coefficient u_c / h_b
+        work.shear[zone] = 0.0
+        work.shear[zone, 0] = p["shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \
+            / model.bottom_thickness
+    elif zone != OUTER and model.channel_radius > 0.0:
+        # G = shear_coefficient u / R with the cell's cloud scale (R_c in the plume, delta in a layer)
+        work.shear[zone] = 0.0
+        np.divide(p["shear_coefficient"] * work.collective[zone], radius, out=work.shear[zone], where=radius > 0.0)
     else:
         work.shear[zone] = 0.0
 
@@ -209,15 +217,16 @@ def _channel(model: Model, content: np.ndarray, work: _Work, cells: np.ndarray):
     d = work.diameters[:, cells, :]
     per_zone = (content[:, cells, NUMBER, :] * math.pi / 6.0 * d**3).sum(axis=(1, 2)) \
         * model.zone_area * model.cell_height
-    total = float(per_zone.sum())
+    total = float(per_zone.sum())  # with the roof layer's droplets, which the radius below leaves out
+    per_zone = per_zone[:ROOF]
     r_c = model.channel_radius
-    r_out = math.sqrt(float(model.zone_area.sum()) / math.pi)
+    r_out = math.sqrt(float(model.zone_area[:ROOF].sum()) / math.pi)
     if total <= 0.0:
         radius = math.nan
-    elif per_zone[CHANNEL] >= 0.5 * total:
-        radius = r_c * math.sqrt(0.5 * total / per_zone[CHANNEL])
+    elif per_zone[CHANNEL] >= 0.5 * per_zone.sum():
+        radius = r_c * math.sqrt(0.5 * per_zone.sum() / per_zone[CHANNEL])
     else:
-        radius = math.sqrt(r_c**2 + (0.5 * total - per_zone[CHANNEL]) / per_zone[OUTER] * (r_out**2 - r_c**2))
+        radius = math.sqrt(r_c**2 + (0.5 * per_zone.sum() - per_zone[CHANNEL]) / per_zone[OUTER] * (r_out**2 - r_c**2))
     velocity = float(np.mean(model.parameters["axis_velocity_ratio"] * work.collective[CHANNEL, cells]
                              + model.downflow[cells]))
     return radius, velocity, total
@@ -253,9 +262,9 @@ def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: 
     mid = np.flatnonzero(np.abs(model.z - 0.5 * height) <= 0.5 * model.cell_height + 1e-12 * height)
     inside = math.pi * min(model.channel_radius, model.inlet_radius) ** 2
     area_in = np.array([inside, max(math.pi * model.inlet_radius**2 - inside, 0.0)])
-    w_mid = number[:, mid, :] * area_in[:, None, None]
+    w_mid = number[:ROOF][:, mid, :] * area_in[:, None, None]
     if w_mid.sum() > 0.0:
-        row["centreline_settling_velocity"] = (w_mid * work.velocities[:, mid, :]).sum() / w_mid.sum()
+        row["centreline_settling_velocity"] = (w_mid * work.velocities[:ROOF][:, mid, :]).sum() / w_mid.sum()
     band = np.flatnonzero(np.abs(model.z - 0.5 * height) <= MID_BAND * height + 1e-12 * height)
     band = band if band.size else mid  # cells taller than the band: the mid-height cell(s)
     row["channel_radius"], row["channel_velocity"], _ = _channel(model, content, work, band)
@@ -287,22 +296,31 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
     for zone in zones:
         area = model.zone_area[zone]
         work.top_source[:] = 0.0
-        if feeding:
+        if feeding and zone in (CHANNEL, OUTER) and not (zone == CHANNEL and model.roof):  # a roof takes the channel's
             rate = model.feed_multiplier * model.zone_feed_fraction[zone] * model.feed_number_rate
             work.top_source[NUMBER] = rate / (area * dz)
             books.fed[NUMBER] += dt * rate
+        if zone == CHANNEL and model.roof:
+            work.top_source += work.roof_out / (area * dz * dt)
         work.bottom_out[:] = 0.0
         work.sink_out[:] = 0.0
-        if model.return_velocity > 0.0 and zone == OUTER:
+        if zone == ROOF:
+            _roof_zone(model, content, work, books, dt, feeding)
+        elif zone == BOTTOM:
+            _bottom_zone(model, content, work, books, dt)
+        elif model.return_velocity > 0.0 and zone == OUTER:
             _return_zone(model, content, work, books, dt)
         else:
             transport_zone(content[zone], work.velocities[zone], model.sink_rate, work.top_source, dz, dt,
                            work.bottom_out, work.sink_out)
-            if model.return_velocity > 0.0:  # the channel: a share settles, the rest turns into the return flow
+            if model.return_velocity > 0.0 and not model.bottom:  # the channel: a share settles, the rest turns
                 share = settling_share(work.velocities[OUTER, 0] + model.return_velocity, model.return_velocity)
                 work.turned[:] = work.bottom_out * (1.0 - share)[None, :] * area
                 work.bottom_out *= share[None, :]
-            books.settled += work.bottom_out * area
+            if model.bottom:  # into the bottom layer, which drops it on the floor
+                work.into_bottom += work.bottom_out * area
+            else:
+                books.settled += work.bottom_out * area
         books.lost += work.sink_out * area
         if p["coalescence"]:
             most = max(most, coalesce_zone(
@@ -325,9 +343,54 @@ def _return_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
     bottom_source = work.turned / (area * dz * dt)  # the channel's turned outflow (its step ran first) [1/m^3/s]
     transport_two_way(content[OUTER], work.velocities[OUTER], model.sink_rate, work.top_source, bottom_source, dz, dt,
                       work.bottom_out, work.top_out, work.sink_out, work.rows[0], work.rows[1], work.rows[2])
-    books.settled += work.bottom_out * area
-    content[CHANNEL, -1] += work.top_out * area / (model.zone_area[CHANNEL] * dz)
+    if model.bottom:
+        work.into_bottom += work.bottom_out * area
+    else:
+        books.settled += work.bottom_out * area
+    rise_into = ROOF if model.roof else CHANNEL  # the risers rejoin the roof layer where there is one
+    content[rise_into, -1] += work.top_out * area / (model.zone_area[rise_into] * dz)
     work.turned[:] = 0.0
+
+
+def _layer_step(content: np.ndarray, inflow: np.ndarray, velocity: np.ndarray, thickness: float, dt: float
+                ) -> np.ndarray:
+    """One well-mixed layer's cell over dt: dc/dt = inflow - (v / h) c per section, integrated exactly for the
+    step's v (so the steady state c = inflow h / v holds whatever dt). content (Q, K) [per m^3] is updated in place;
+    returns what drained out of it [per m^3]. inflow (Q, K) [per m^3 per s], velocity (K,) [m/s, >= 0]."""
+    rate = velocity / thickness
+    decay = np.exp(-dt * rate)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gained = np.where(rate > 0.0, -np.expm1(-dt * rate) / rate, dt)  # integral of exp(-rate s) over the step
+    new = content * decay[None, :] + inflow * gained[None, :]
+    out = content + inflow * dt - new
+    content[:] = new
+    return out
+
+
+def _bottom_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, dt: float) -> None:
+    """The bottom layer over dt (popbal.closures): what left the channel's and the outer zone's bottom during the
+    step flows into its one (bottom) cell at a constant rate, and section k drops onto the floor (settles) at its
+    own hindered settling velocity v_k (properties at the step start): :func:`_layer_step`."""
+    volume = model.zone_area[BOTTOM] * model.cell_height
+    velocity = np.maximum(work.velocities[BOTTOM, 0], 0.0)
+    out = _layer_step(content[BOTTOM, 0], work.into_bottom / (volume * dt), velocity, model.bottom_thickness, dt)
+    work.into_bottom[:] = 0.0
+    books.settled += out * volume
+
+
+def _roof_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, dt: float, feeding: bool) -> None:
+    """The roof layer over dt (popbal.closures): the channel's share of the feed enters its one (top) cell, and
+    section k drains out of its bottom at its velocity v_k (the layer's u_L plus the droplets' own hindered
+    settling; properties at the step start): :func:`_layer_step`. What drained goes to work.roof_out [absolute
+    amounts], which the channel's top cell receives in the same step."""
+    volume = model.zone_area[ROOF] * model.cell_height
+    inflow = np.zeros_like(work.roof_out)
+    if feeding:
+        rate = model.feed_multiplier * model.zone_feed_fraction[CHANNEL] * model.feed_number_rate
+        inflow[NUMBER] = rate / volume
+        books.fed[NUMBER] += dt * rate
+    velocity = np.maximum(work.velocities[ROOF, -1], 0.0)
+    work.roof_out[:] = _layer_step(content[ROOF, -1], inflow, velocity, model.roof_thickness, dt) * volume
 
 
 def _seconds(name: str, value) -> float:
@@ -391,7 +454,8 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
     content = np.zeros((len(ZONES), cells, QUANTITIES, grid.size))
     work = _Work(cells, grid.size)
     books = _Books(grid.size)
-    zones = [z for z in (CHANNEL, OUTER) if model.zone_area[z] > 0.0]
+    # the roof drains into the channel, channel and outer zone into the bottom layer
+    zones = [z for z in (ROOF, CHANNEL, OUTER, BOTTOM) if model.zone_area[z] > 0.0]
     numbers = model.numbers()
     start_up_line = f"popbal {model.name}: " + "; ".join(f"{q.name} {q.value:.4g} {q.unit}" for q in numbers)
     if progress:

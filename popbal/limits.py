@@ -48,7 +48,7 @@ MEMORY_FALLBACK = 4e9
 #: Environment variable that sets the limit in GB (10^9 bytes).
 MEMORY_LIMIT_VARIABLE = "POPBAL_MEMORY_LIMIT_GB"
 
-ZONE_COUNT = 2
+ZONE_COUNT = 4  # popbal.model.ZONES: channel, outer, roof layer, bottom layer (model imports this module)
 QUANTITY_COUNT = 3
 #: Bytes of the (K, K) section-pair arrays: merger targets (int64), loss weights, beta, the 'step'-rule
 #: speed-limit table (built from nested lists: a Python float and a list slot per pair before the array), and the

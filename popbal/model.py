@@ -6,7 +6,9 @@
 :func:`settler.derived.settling_velocity`, feed rates from :mod:`settler.physics.feed`, the reaction from
 :mod:`settler.physics.matte`.
 
-Zones: index 0 is the channel under the inlet, index 1 the outer zone (see :mod:`popbal.closures`).
+Zones: index 0 is the channel under the inlet, index 1 the outer zone, index 2 the roof layer under the inlet (only
+its top cell is used), index 3 the bottom layer over the floor (only its bottom cell is used); area 0 without
+them (see :mod:`popbal.closures`).
 """
 
 from __future__ import annotations
@@ -27,8 +29,8 @@ from . import closures, limits
 from .grid import SectionGrid, make_grid, split_to_pivots, volume_of
 from .kernels import merger_speed_limit
 
-ZONES = ("channel", "outer")
-CHANNEL, OUTER = 0, 1
+ZONES = ("channel", "outer", "roof", "bottom")
+CHANNEL, OUTER, ROOF, BOTTOM = 0, 1, 2, 3
 
 #: Velocity-table resolution with reaction: ages 0 ... TABLE_SPAN time constants in steps of 1/TABLE_PER_TAU.
 TABLE_PER_TAU = 20
@@ -43,7 +45,10 @@ class Model:
     """Everything a run needs, as arrays and scalars (SI units). Built by :func:`setup`.
 
     grid: the sections (original droplet volume). cells J, cell_height dz [m], z (J,) cell centres [m].
-    zone_area (2,) [m^2]: channel, outer. feed_number_rate (K,) [1/s]: droplets fed per second per section.
+    zone_area (4,) [m^2]: channel, outer, roof, bottom; the layers' are their volume per cell height (A_L delta / dz
+    and A_box h_b / dz), so that their one cell (the top, the bottom) holds the layer's volume (0: no such layer).
+    bottom_thickness h_b [m]. roof_thickness delta [m] and
+    roof_coefficient / roof_radius (J,): the roof cell's cloud law (c_L, delta in the top cell, 0 below). feed_number_rate (K,) [1/s]: droplets fed per second per section.
     zone_feed_fraction (2,) [-]. feed_multiplier [-] and feed_end [s]: the feed is feed_multiplier x the case's rate
     while t < feed_end. downflow (J,) [m/s]: slag velocity at each cell's lower face; sink_rate (J,) [1/s]: slag
     withdrawal per unit volume. velocity_table (K, M) [m/s] single-droplet settling velocity over age, age_step [s].
@@ -83,6 +88,20 @@ class Model:
     gravity: float = STANDARD_GRAVITY
     parameters: dict = field(default_factory=dict)
     return_velocity: float = 0.0
+    roof_thickness: float = 0.0
+    roof_coefficient: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    roof_radius: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    bottom_thickness: float = 0.0
+
+    @property
+    def roof(self) -> bool:
+        """Whether the model has a roof layer (popbal.closures)."""
+        return self.zone_area[ROOF] > 0.0
+
+    @property
+    def bottom(self) -> bool:
+        """Whether the model has a bottom layer (popbal.closures)."""
+        return self.zone_area[BOTTOM] > 0.0
 
     @property
     def name(self) -> str:
@@ -128,7 +147,10 @@ def build(case: Case) -> Model:
     if channel_area == 0.0 and p.channel_feed_fraction > 0.0:
         raise CaseError(f"popbal.channel_feed_fraction = {p.channel_feed_fraction!r}: allowed 0 when "
                         "popbal.channel_radius_factor = 0 (no channel zone)")
-    zone_area = np.array([channel_area, box_area - channel_area])
+    roof_volume, roof_coefficient, roof_radius = roof_layer(case, channel_area, cells=p.height_cells)
+    bottom_thickness = bottom_layer(case, channel_radius)
+    zone_area = np.array([channel_area, box_area - channel_area, roof_volume / (g.height / p.height_cells),
+                          box_area * bottom_thickness / (g.height / p.height_cells)])
 
     # sections: original volumes from the smallest fed droplet to the largest a merger may make
     fed_diameters, fed_numbers = feed_points(case)
@@ -234,7 +256,50 @@ def build(case: Case) -> Model:
                  velocity_table=table, age_step=tau / TABLE_PER_TAU, residence_time=residence, stop_time=stop_time,
                  horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
                  viscosity=case.slag_viscosity, cloud_coefficient=cloud_coefficient, cloud_radius=cloud_radius,
-                 parameters=parameters, return_velocity=return_velocity)
+                 parameters=parameters, return_velocity=return_velocity, roof_thickness=p.roof_thickness or 0.0,
+                 roof_coefficient=roof_coefficient, roof_radius=roof_radius, bottom_thickness=bottom_thickness)
+
+
+def bottom_layer(case: Case, channel_radius: float) -> float:
+    """The bottom layer's thickness h_b = popbal.bottom_layer_factor x R_c [m]; 0 without a bottom layer. CaseError
+    without a channel or where the layer would fill half the height."""
+    p, g = case.popbal, case.geometry
+    if p.bottom_layer_factor is None:
+        return 0.0
+    if channel_radius == 0.0:
+        raise CaseError(f"popbal.bottom_layer_factor = {p.bottom_layer_factor!r}: the bottom layer's thickness is set by "
+                        "the channel radius; allowed only with a channel zone (popbal.channel_radius_factor > 0)")
+    thickness = p.bottom_layer_factor * channel_radius
+    if thickness > g.height / 2:
+        raise CaseError(f"popbal.bottom_layer_factor = {p.bottom_layer_factor!r}: the bottom layer ({thickness:.4g} m "
+                        f"thick) would fill more than half the slag height geometry.height = {g.height:g} m")
+    return thickness
+
+
+def roof_layer(case: Case, channel_area: float, cells: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """(volume A_L delta [m^3], cloud coefficient (J,) [-], cloud length (J,) [m]) of the roof layer: the inlet
+    disk's area A_L times popbal.roof_thickness delta, with c_L and delta in the top cell and 0 below; volume 0 and
+    zero arrays without a roof layer. CaseError where the keys do not go together."""
+    p, g = case.popbal, case.geometry
+    coefficient, radius = np.zeros(cells), np.zeros(cells)
+    if p.roof_layer_coefficient is None and p.roof_thickness is None:
+        return 0.0, coefficient, radius
+    if p.roof_layer_coefficient is None or p.roof_thickness is None:
+        given = "roof_layer_coefficient" if p.roof_thickness is None else "roof_thickness"
+        raise CaseError(f"popbal.{given} = {getattr(p, given)!r}: needs the other of popbal.roof_layer_coefficient "
+                        "and popbal.roof_thickness; allowed: give both, or neither (no roof layer)")
+    if p.roof_thickness > g.height / 2:
+        raise CaseError(f"popbal.roof_thickness = {p.roof_thickness!r} m: allowed at most half the slag height "
+                        f"geometry.height = {g.height:g} m")
+    if channel_area == 0.0 or p.channel_feed_fraction == 0.0:
+        raise CaseError(f"popbal.roof_layer_coefficient = {p.roof_layer_coefficient!r}: the roof layer drains into the "
+                        "channel and takes its feed; allowed only with a channel zone (popbal.channel_radius_factor "
+                        "> 0 and popbal.channel_feed_fraction > 0)")
+    if p.feed_layer_thickness:
+        raise CaseError(f"popbal.feed_layer_thickness = {p.feed_layer_thickness!r} m: the channel's feed layer and the "
+                        "roof layer describe the same layer; allowed: one of them")
+    coefficient[-1], radius[-1] = p.roof_layer_coefficient, p.roof_thickness
+    return math.pi * (0.5 * g.inlet_diameter) ** 2 * p.roof_thickness, coefficient, radius
 
 
 def column_radius(case: Case) -> float:
@@ -364,6 +429,10 @@ def start_up_numbers(model: Model) -> list[Quantity]:
                      "1 / (1 + Re / popbal.plume_reynolds_scale); 1 without"),
             Quantity("feed layer velocity u_L (steady, dilute)", _layer_velocity(model, q_channel, excess), "m/s",
                      "sqrt(c_L j drho g / mu) delta, j = Q_ch / (pi R_c^2); nan without a feed layer"),
+            Quantity("roof layer's steady matte per unit area", _roof_inventory(model, q_channel, excess), "m",
+                     "sqrt(j mu / (c_L drho g)), j = Q_ch / inlet area; nan without a roof layer"),
+            Quantity("bottom layer thickness h_b", model.bottom_thickness if model.bottom else math.nan, "m",
+                     "bottom_layer_factor x R_c; nan without a bottom layer"),
             Quantity("channel shear rate G", model.parameters["shear_coefficient"] * u_c / model.channel_radius,
                      "1/s", "shear_coefficient u_c / R_c"),
             Quantity("Courant number of u_c at time_step", u_c * model.parameters["time_step"] / model.cell_height,
@@ -389,3 +458,12 @@ def _layer_velocity(model: Model, volume_flux: float, excess_density: float) -> 
     j = volume_flux / model.zone_area[CHANNEL]
     return math.sqrt(p.feed_layer_coefficient * j * excess_density * model.gravity / model.viscosity) \
         * p.feed_layer_thickness
+
+
+def _roof_inventory(model: Model, volume_flux: float, excess_density: float) -> float:
+    """The roof layer's steady, dilute matte volume per unit area [m] (popbal.closures.roof_inventory)."""
+    if not model.roof:
+        return math.nan
+    flux = volume_flux / (math.pi * model.inlet_radius**2)
+    return closures.roof_inventory(flux, excess_density, model.viscosity, model.case.popbal.roof_layer_coefficient,
+                                   model.gravity)

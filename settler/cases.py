@@ -237,6 +237,23 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                       optional=True),
         "feed_layer_coefficient": Field(F, "-", "c_L of the feed layer's velocity u_L = c_L phi drho g delta^2 / mu "
                                                 "(needed when feed_layer_thickness > 0).", 0.0, optional=True),
+        "roof_layer_coefficient": Field(F, "-", "c_L of the roof layer: a well-mixed layer of thickness "
+                                                "roof_thickness under the whole inlet disk that takes the channel's "
+                                                "feed and the return flow's risers and drains into the channel at "
+                                                "u_L = c_L phi drho g delta^2 / mu, so it holds sqrt(j mu / "
+                                                "(c_L drho g)) of matte per unit area at a feed flux j "
+                                                "(popbal.closures); absent: no roof layer.", 0.0,
+                                        exclusive_minimum=True, optional=True),
+        "roof_thickness": Field(F, "m", "Thickness delta of the roof layer (needed with roof_layer_coefficient).",
+                                0.0, exclusive_minimum=True, optional=True),
+        "bottom_layer_factor": Field(F, "-", "The bottom layer: a well-mixed layer over the whole floor, of thickness "
+                                             "h_b = bottom_layer_factor x the channel radius R_c (the plume's "
+                                             "discharge spreads about one plume radius deep), that takes what leaves "
+                                             "the channel's and the outer zone's bottom and drops it on the floor at "
+                                             "the droplets' own hindered settling velocity, merging them at its own "
+                                             "volume fraction; none of it turns into the return flow "
+                                             "(popbal.closures); absent: no bottom layer.", 0.0,
+                                     exclusive_minimum=True, optional=True),
         "axis_velocity_ratio": Field(F, "-", "Slag velocity on the channel axis (the channel_velocity output) / the "
                                              "plume velocity u_c that carries the droplets; absent: 1.", 0.0,
                                      exclusive_minimum=True, optional=True),

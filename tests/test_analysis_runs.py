@@ -46,7 +46,7 @@ def test_distribution_dataset_labels_and_units(reduced):
     folder, result = reduced
     ds = load_run(folder).distribution()
     model = result.model
-    assert dict(ds.sizes) == {"time": 9, "zone": 2, "z": model.cells, "section": model.grid.size}
+    assert dict(ds.sizes) == {"time": 9, "zone": len(popbal.ZONES), "z": model.cells, "section": model.grid.size}
     assert ds.number_density.dims == ("time", "zone", "z", "section") and ds.fed_mass.dims == ("time", "section")
     assert list(ds.zone.values) == list(popbal.ZONES)
     for name, (unit, _) in popbal.DISTRIBUTION_ARRAYS.items():

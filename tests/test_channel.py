@@ -67,12 +67,12 @@ def test_popbal_channel_radius_of_a_uniform_suspension():
     the half-volume radius is that of half the area, R_out / sqrt(2) with R_out = sqrt(A / pi)."""
     from popbal.driver import _channel, _Work
     from popbal.kernels import NUMBER, QUANTITIES
-    from popbal.model import setup
+    from popbal.model import ZONES, setup
 
     model = setup(load_case("demo"))
     cells, sections = model.cells, model.grid.size
-    content = np.zeros((2, cells, QUANTITIES, sections))
-    content[:, :, NUMBER, 3] = 1e6
+    content = np.zeros((len(ZONES), cells, QUANTITIES, sections))
+    content[:, :, NUMBER, 3] = 1e6  # the demo has no roof or bottom layer (zone area 0)
     work = _Work(cells, sections)
     work.diameters[:] = 1e-3
     radius, velocity, volume = _channel(model, content, work, np.arange(cells))

@@ -28,10 +28,10 @@ def test_every_preset_sets_up_and_runs(name):
     assert ts.mass_fed.iloc[-1] > 0.0 and ts.droplet_count.iloc[-1] > 0.0
     for column in ("max_cell_reynolds", "max_cfl", "max_overlap_ratio", "wall_time"):
         assert ts[column].isna().all()
-    shape = (ts.shape[0], 2, model.cells, model.grid.size)
+    shape = (ts.shape[0], len(popbal.ZONES), model.cells, model.grid.size)
     assert result.number_density.shape == shape and result.diameter.shape == shape
     frame = result.size_distribution()
-    assert set(frame.zone) <= set(popbal.ZONES) and len(frame) == 2 * model.cells * model.grid.size
+    assert set(frame.zone) <= set(popbal.ZONES) and len(frame) == len(popbal.ZONES) * model.cells * model.grid.size
 
 
 def test_command_line_writes_the_outputs(tmp_path, capsys):

@@ -19,6 +19,9 @@ PARAMETERS: dict[str, tuple[float, float, str]] = {
     "axis_velocity_ratio": (0.2, 5.0, "-"),
     "plume_reynolds_scale": (1e-2, 100.0, "-"),
     "return_flow_ratio": (0.0, 100.0, "-"),
+    "roof_layer_coefficient": (1e-4, 10.0, "-"),
+    "roof_thickness": (1e-3, 0.05, "m"),
+    "bottom_layer_factor": (0.05, 20.0, "-"),
 }
 
 

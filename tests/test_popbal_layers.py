@@ -1,0 +1,117 @@
+"""popbal's roof and bottom layers (popbal.closures, popbal.driver): steady states against their closed forms, mass
+accounting, refusals.
+
+Tier (d) verification of STYLE.md: with coalescence and reaction off and one fed size, a well-mixed layer fed at the
+volume flux density j that drains at its droplets' velocity v(phi) holds phi with phi v(phi) = j. The roof's v is
+the layer's cloud law c_L phi drho g delta^2 / mu plus the droplets' own hindered settling; the bottom layer's the
+hindered settling alone. The closed forms below are solved independently of the model (scipy's brentq on the
+shared settling law), so a wrong drain, a wrong volume or a lost inflow shows.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+import popbal
+from popbal.closures import roof_coefficient, roof_inventory
+from popbal.model import BOTTOM, CHANNEL, ROOF
+from settler.cases import CaseError
+from settler.derived import settling_velocity
+from settler.physics import STANDARD_GRAVITY, richardson_zaki_factor
+
+C_L, DELTA = 0.1, 0.005  # the roof law's coefficient [-] and thickness [m] (chosen for the test)
+# a quarter of the demo's feed: the bottom layer's flux Q / A then stays below the largest hindered settling flux
+# max phi U (1 - phi)^n of the fed size (above it the layer fills and has no steady state, as a settling bed would)
+SINGLE_SIZE = ["coalescence.enabled=false", "reaction.enabled=false", "feed.scale_std=0", "slag.feed_rate=0",
+               "feed.mass_rate=0.0005",
+               "popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6", "popbal.channel_coefficient=0.4",
+               "popbal.return_flow_ratio=0.05"]
+LAYERS = [f"popbal.roof_layer_coefficient={C_L}", f"popbal.roof_thickness={DELTA}", "popbal.bottom_layer_factor=1"]
+
+
+@pytest.fixture(scope="module")
+def steady():
+    model = popbal.setup("demo", SINGLE_SIZE + LAYERS + ["popbal.end_time=200", "popbal.output_interval=10"])
+    return model, popbal.run(model, progress=False)
+
+
+def _volume_fraction(result, zone, cell):
+    number = result.arrays["number_density"][-1][zone, cell]
+    return float((number * math.pi / 6.0 * result.arrays["original_diameter"] ** 3).sum())
+
+
+def test_roof_layer_holds_its_closed_form_volume_fraction(steady):
+    model, result = steady
+    case = model.case
+    q = case.feed.mass_rate / case.matte.density
+    j = q / (math.pi * model.inlet_radius**2)
+    drho = case.matte.density - case.slag.density
+    own = settling_velocity(case, case.feed.mean_diameter)
+    n = model.parameters["hindered_exponent"]
+
+    def balance(phi):
+        cloud = C_L * phi * drho * STANDARD_GRAVITY * DELTA**2 / model.viscosity
+        return phi * (cloud + own * richardson_zaki_factor(phi, n)) - j
+
+    expected = brentq(balance, 1e-12, 0.5, xtol=1e-15)
+    got = _volume_fraction(result, ROOF, -1)
+    print(f"\nroof: phi {got:.6g} against {expected:.6g}; matte per area {got * DELTA * 1e6:.1f} um, the dilute "
+          f"law without own settling {roof_inventory(j, drho, model.viscosity, C_L) * 1e6:.1f} um")
+    assert got == pytest.approx(expected, rel=1e-4)
+    # the law's inverse gives back c_L from the inventory it predicts
+    assert roof_coefficient(j, roof_inventory(j, drho, model.viscosity, C_L), drho, model.viscosity) \
+        == pytest.approx(C_L, rel=1e-12)
+
+
+def test_bottom_layer_holds_its_closed_form_volume_fraction(steady):
+    model, result = steady
+    case = model.case
+    q = case.feed.mass_rate / case.matte.density
+    box = case.geometry.width * case.geometry.depth
+    own = settling_velocity(case, case.feed.mean_diameter)
+    n = model.parameters["hindered_exponent"]
+    expected = brentq(lambda phi: phi * own * richardson_zaki_factor(phi, n) - q / box, 1e-12, 0.5, xtol=1e-15)
+    got = _volume_fraction(result, BOTTOM, 0)
+    assert model.bottom_thickness == pytest.approx(model.channel_radius, rel=1e-12)
+    print(f"\nbottom: phi {got:.6g} against {expected:.6g}, h_b {model.bottom_thickness * 1e3:.2f} mm")
+    assert got == pytest.approx(expected, rel=1e-4)
+    # only the layers' own cells hold droplets
+    number = result.arrays["number_density"][-1]
+    assert not number[ROOF, :-1].any() and not number[BOTTOM, 1:].any()
+
+
+def test_layers_keep_the_mass_and_settle_the_feed(steady):
+    _, result = steady
+    series = result.timeseries
+    assert np.abs(series["mass_balance_error"]).max() < 1e-10
+    late = series[series["time"] >= 150.0]
+    flux = np.polyfit(late["time"], late["mass_settled"], 1)[0]
+    fed = np.polyfit(late["time"], late["mass_fed"], 1)[0]
+    assert flux == pytest.approx(fed, rel=1e-3)  # steady: what is fed settles
+
+
+def test_layers_keep_the_mass_with_coalescence_and_reaction():
+    result = popbal.run(popbal.setup("demo", LAYERS + ["popbal.channel_radius_form=flux",
+                                                        "popbal.channel_radius_factor=4.6", "popbal.end_time=20"]),
+                        progress=False)
+    assert np.abs(result.timeseries["mass_balance_error"]).max() < 1e-10
+    assert result.arrays["number_density"][-1][ROOF].sum() > 0.0
+    assert result.arrays["number_density"][-1][CHANNEL].sum() > 0.0
+
+
+@pytest.mark.parametrize("overrides, names", [
+    (["popbal.roof_thickness=0.005"], "roof_layer_coefficient"),
+    (["popbal.roof_layer_coefficient=0.1"], "roof_thickness"),
+    (["popbal.roof_layer_coefficient=0.1", "popbal.roof_thickness=0.08"], "half the slag height"),
+    (LAYERS[:2] + ["popbal.feed_layer_thickness=0.005", "popbal.feed_layer_coefficient=0.03"], "one of them"),
+    (LAYERS[:2] + ["popbal.channel_radius_factor=0", "popbal.channel_feed_fraction=0"], "channel zone"),
+    (["popbal.bottom_layer_factor=1", "popbal.channel_radius_factor=0", "popbal.channel_feed_fraction=0"],
+     "channel zone"),
+    (["popbal.bottom_layer_factor=40", "popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6"],
+     "half the slag height"),
+])
+def test_layer_keys_that_do_not_go_together_are_refused(overrides, names):
+    with pytest.raises(CaseError, match=names):
+        popbal.setup("demo", overrides)
