@@ -30,13 +30,14 @@ def run_set(args) -> int:
             print(f"calibrate: leaving out family {leave_out!r} ({', '.join(registry.families[leave_out])}): "
                   "scored below with the pre-registered hold-outs")
         result = calibrate_set(registry, args.reference_dir, max_evaluations=args.max_evaluations,
-                               progress=not args.quiet, band_samples=samples)
+                               progress=not args.quiet, band_samples=samples,
+                               closures=getattr(args, "closures", "designed"))
     except (RegistryError, FileNotFoundError) as exc:
         raise OutputError(str(exc)) from None
     text = result.summary()
     print(text)
     if out is not None:
-        data = {"leave_out": leave_out, "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values, "radius_factor": result.radius_factor,
+        data = {"closures": result.closures, "roof": result.roof, "leave_out": leave_out, "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values, "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,
                 "coverage": result.coverage,
                 "levels": [{k: v for k, v in fit.__dict__.items()} for fit in result.levels]}

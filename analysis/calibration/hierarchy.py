@@ -35,7 +35,15 @@ from .targets import TARGET_COLUMNS, load_target, seed_scatter
 #: What each fitted level fits ([popbal] keys) and from where it starts.
 LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "return_flow_ratio"),
                     "whole": ("shear_coefficient",)}
-START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0}
+#: The closure sets ``settler calibrate --set --closures NAME`` fits: their levels' parameters, and whether the roof
+#: and bottom layers are on ('layers': the roof law's c_L and thickness from the zone diagnostics, not fitted, the
+#: bottom layer's thickness factor fitted with the plume in place of the return flow, which carries no droplets
+#: where the bottom layer takes everything that reaches the floor; popbal.closures).
+CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
+            "layers": {"levels": {"transport": ("channel_coefficient", "bottom_layer_factor"),
+                                  "whole": ("shear_coefficient",)}, "layers": True}}
+START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
+         "bottom_layer_factor": 1.0}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
 FORM = {"popbal.channel_radius_form": "flux"}
 #: The issue's targets: relative error of a window mean, fitted runs and hold-outs.
@@ -59,6 +67,8 @@ class Hierarchy:
     gate_passed: bool
     missing: dict[str, list[str]] = field(default_factory=dict)  # level -> registered runs not stored yet
     coverage: dict | None = None  # the hold-outs' window means inside their 90 % bands (bands.coverage)
+    closures: str = "designed"  # the CLOSURES entry fitted
+    roof: dict | None = None  # the roof law from the zone diagnostics (roof_from_zones), with 'layers'
 
     def summary(self) -> str:
         c = self.collision
@@ -67,6 +77,10 @@ class Hierarchy:
                  f"flux form radius factor from the zone diagnostics: k_R = {self.radius_factor['value']:.2f} "
                  f"(core volume fraction {self.radius_factor['core_fraction']:.4f} in "
                  f"{', '.join(self.radius_factor['runs'])})"]
+        if self.roof:
+            lines.append(f"roof layer from the zone diagnostics: c_L = {self.roof['coefficient']:.4g} (per run "
+                         + ", ".join(f"{r} {v:.3g}" for r, v in self.roof["per_run"].items())
+                         + f"), thickness {self.roof['thickness'] * 1e3:.3g} mm")
         for fit in self.levels:
             lines.append(f"level {fit.level}: runs {', '.join(fit.runs)}; chi2 {fit.chi2:.3g} for {fit.residual_count} "
                          f"residuals, discrepancy {fit.discrepancy:.3g}, {fit.evaluations} model runs ({fit.status})")
@@ -128,6 +142,34 @@ def radius_factor_from_zones(runs, reference_dir: str | Path) -> dict:
     return {"value": phi ** -0.5, "core_fraction": phi, "runs": list(runs)}
 
 
+def roof_from_zones(runs, reference_dir: str | Path) -> dict:
+    """The roof law's c_L [-] and thickness delta [m] from the roof layer of the zone diagnostics (``zones.csv``):
+    per run, over its steady window, the matte volume per unit area I = mean(roof_thickness x roof_volume_fraction)
+    and c_L = j mu / (drho g I^2) (popbal.closures.roof_coefficient, j the matte feed over the inlet disk); c_L
+    the geometric mean over the runs, delta the mean thickness."""
+    import math
+
+    from analysis.runs import load_run
+    from popbal.closures import roof_coefficient
+    from settler.cases import load_case
+
+    from .targets import window_of
+
+    per_run, thickness = {}, []
+    for run in runs:
+        folder = Path(reference_dir) / run
+        zones = pd.read_csv(folder / "zones.csv", comment="#")
+        (start, end), _ = window_of(load_run(folder).timeseries)
+        rows = zones[(zones["time"] >= start) & (zones["time"] <= end)]
+        inventory = float((rows["roof_thickness"] * rows["roof_volume_fraction"].fillna(0.0)).mean())
+        case = load_case(folder / "case.toml")
+        flux = case.feed.mass_rate / case.matte.density / (math.pi * (0.5 * case.geometry.inlet_diameter) ** 2)
+        per_run[run] = roof_coefficient(flux, inventory, case.matte.density - case.slag.density, case.slag_viscosity)
+        thickness.append(float(rows["roof_thickness"].mean()))
+    coefficient = float(np.exp(np.mean(np.log(list(per_run.values())))))
+    return {"coefficient": coefficient, "thickness": float(np.mean(thickness)), "per_run": per_run, "runs": list(runs)}
+
+
 def _stored(runs, reference_dir) -> tuple[list[str], list[str]]:
     root = Path(reference_dir)
     have = [r for r in runs if (root / r / "timeseries.csv").is_file()]
@@ -135,8 +177,12 @@ def _stored(runs, reference_dir) -> tuple[list[str], list[str]]:
 
 
 def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
-                  profile: bool = True, progress: bool = True, band_samples: int = BAND_SAMPLES) -> Hierarchy:
-    """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds."""
+                  profile: bool = True, progress: bool = True, band_samples: int = BAND_SAMPLES,
+                  closures: str = "designed") -> Hierarchy:
+    """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds, with the
+    closure set ``closures`` (:data:`CLOSURES`)."""
+    if closures not in CLOSURES:
+        raise ValueError(f"closures {closures!r}: allowed {', '.join(CLOSURES)}")
     from analysis.kernel_run import kernel_run_efficiency
 
     seed = seed_scatter(reference_dir)
@@ -153,6 +199,10 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     k_r = radius_factor_from_zones(transport_runs, reference_dir)
     fixed = {**FORM, "popbal.channel_radius_factor": k_r["value"],
              "popbal.collision_efficiency": collision["efficiency"]}
+    roof = None
+    if CLOSURES[closures]["layers"]:
+        roof = roof_from_zones(transport_runs, reference_dir)
+        fixed.update({"popbal.roof_layer_coefficient": roof["coefficient"], "popbal.roof_thickness": roof["thickness"]})
     levels = []
     for level in ("transport", "whole"):
         if level == "transport":
@@ -162,7 +212,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
         refuse_holdouts(runs, registry, f"level {level}")
         targets = [load_target(r, reference_dir, seed) for r in runs]
         case_files = {r: Path(reference_dir) / r / "case.toml" for r in runs}
-        parameters = LEVEL_PARAMETERS[level]
+        parameters = CLOSURES[closures]["levels"][level]
         fit = fit_level(level, targets, case_files, parameters, {p: START[p] for p in parameters}, fixed,
                         max_evaluations=max_evaluations, profile=profile, progress=progress)
         levels.append(fit)
@@ -176,7 +226,8 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
                                                           band_samples)
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
-                     missing={k: v for k, v in missing.items() if v}, coverage=coverage_result)
+                     missing={k: v for k, v in missing.items() if v}, coverage=coverage_result, closures=closures,
+                     roof=roof)
 
 
 def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, samples):

@@ -63,6 +63,11 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
              f"over its gravitational collisions, standard error {c['standard_error']:.3g}",
              f"channel_radius_factor = {k_r['value']!r}  # - [derived] phi_p^(-1/2) of the plume core's volume "
              f"fraction {k_r['core_fraction']:.4g} in the zone diagnostics of {', '.join(k_r['runs'])}"]
+    if result.roof:
+        r = result.roof
+        lines += [f"roof_layer_coefficient = {r['coefficient']!r}  # - [derived] the geometric mean of j mu / (drho g I^2)"
+                  f" over the roof layers of {', '.join(r['runs'])} (zones.csv)",
+                  f"roof_thickness = {r['thickness']!r}  # m [derived] the mean roof thickness of {', '.join(r['runs'])}"]
     for fit in result.levels:
         for name in fit.parameters:
             lines.append(f"{name} = {fit.estimates[name]!r}  # - [derived] level {fit.level}: fit to "
@@ -72,7 +77,7 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
     lines += ["", "[provenance]", f"command = {_q(command or 'settler calibrate --set')}",
               f"code_commit = {_q(commit['commit'])}", f"code_tree_dirty = {str(bool(commit['dirty'])).lower()}",
               f"date = {_q(datetime.date.today().isoformat())}", f"registry = {_q(_portable(registry_path))}",
-              f"gate_passed = {str(result.gate_passed).lower()}"]
+              f"gate_passed = {str(result.gate_passed).lower()}", f"closures = {_q(result.closures)}"]
     for level, runs in result.missing.items():
         lines.append(f"not_stored_{level} = [{', '.join(_q(r) for r in runs)}]  # [derived] registered, not run yet")
     lines += ["", "[provenance.collision]", f"efficiency = {c['efficiency']!r}  # - [derived]",
