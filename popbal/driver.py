@@ -43,12 +43,13 @@ from .kernels import (AGE, FES_REMOVED, NEGLIGIBLE_VOLUME_FRACTION, NUMBER, QUAN
                       coalesce_zone, react_zone, transport_two_way, transport_zone)
 from .model import BOTTOM, CHANNEL, OUTER, ROOF, ZONES, Model, setup
 
-#: Arrays of distribution.npz: name -> (unit, meaning). T outputs, Z = 2 zones, J cells, K sections.
+#: Arrays of distribution.npz: name -> (unit, meaning). T outputs, Z = 4 zones (popbal.model.ZONES), J cells, K
+#: sections.
 DISTRIBUTION_ARRAYS: dict[str, tuple[str, str]] = {
     "time": ("s", "(T,) output times"),
     "z": ("m", "(J,) cell-centre heights above the bottom of the slag"),
-    "zone_area": ("m^2", "(Z,) horizontal area of the channel and outer zones; the roof layer's volume per cell height "
-                         "(its one top cell holds the layer; 0: no roof layer)"),
+    "zone_area": ("m^2", "(Z,) horizontal area of the channel and outer zones; the roof and bottom layers' volume per "
+                         "cell height (each layer's one cell holds it; 0: no such layer)"),
     "original_volume": ("m^3", "(K,) pivot volumes of the sections (droplet volume at the feed composition)"),
     "original_diameter": ("m", "(K,) pivot diameters of the sections at the feed composition"),
     "number_density": ("1/m^3", "(T, Z, J, K) droplets per m^3 of slag"),
@@ -166,6 +167,7 @@ class _Work:
         self.rows = np.zeros((3, cells))
         self.into_bottom = np.zeros((QUANTITIES, sections))  # what reached the bottom layer in the step [absolute]
         self.roof_out = np.zeros((QUANTITIES, sections))  # what drained from the roof layer during the step [absolute]
+        self.roof_in = np.zeros((QUANTITIES, sections))  # the roof layer's inflow during the step [per m^3 per s]
 
 
 def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
@@ -296,7 +298,7 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
     for zone in zones:
         area = model.zone_area[zone]
         work.top_source[:] = 0.0
-        if feeding and zone in (CHANNEL, OUTER) and not (zone == CHANNEL and model.roof):  # a roof takes the channel's
+        if feeding and (zone == OUTER or (zone == CHANNEL and not model.roof)):  # a roof takes the channel's feed
             rate = model.feed_multiplier * model.zone_feed_fraction[zone] * model.feed_number_rate
             work.top_source[NUMBER] = rate / (area * dz)
             books.fed[NUMBER] += dt * rate
@@ -317,10 +319,7 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
                 share = settling_share(work.velocities[OUTER, 0] + model.return_velocity, model.return_velocity)
                 work.turned[:] = work.bottom_out * (1.0 - share)[None, :] * area
                 work.bottom_out *= share[None, :]
-            if model.bottom:  # into the bottom layer, which drops it on the floor
-                work.into_bottom += work.bottom_out * area
-            else:
-                books.settled += work.bottom_out * area
+            _reach_floor(model, work, books, area)
         books.lost += work.sink_out * area
         if p["coalescence"]:
             most = max(most, coalesce_zone(
@@ -343,13 +342,19 @@ def _return_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
     bottom_source = work.turned / (area * dz * dt)  # the channel's turned outflow (its step ran first) [1/m^3/s]
     transport_two_way(content[OUTER], work.velocities[OUTER], model.sink_rate, work.top_source, bottom_source, dz, dt,
                       work.bottom_out, work.top_out, work.sink_out, work.rows[0], work.rows[1], work.rows[2])
+    _reach_floor(model, work, books, area)
+    rise_into = ROOF if model.roof else CHANNEL  # the risers rejoin the roof layer where there is one
+    content[rise_into, -1] += work.top_out * area / (model.zone_area[rise_into] * dz)
+    work.turned[:] = 0.0
+
+
+def _reach_floor(model: Model, work: _Work, books: _Books, area: float) -> None:
+    """What left a zone (of ``area`` [m^2]) through its bottom this step, work.bottom_out [per m^2]: settled, or into
+    the bottom layer where there is one, which drops it on the floor (:func:`_bottom_zone`)."""
     if model.bottom:
         work.into_bottom += work.bottom_out * area
     else:
         books.settled += work.bottom_out * area
-    rise_into = ROOF if model.roof else CHANNEL  # the risers rejoin the roof layer where there is one
-    content[rise_into, -1] += work.top_out * area / (model.zone_area[rise_into] * dz)
-    work.turned[:] = 0.0
 
 
 def _layer_step(content: np.ndarray, inflow: np.ndarray, velocity: np.ndarray, thickness: float, dt: float
@@ -384,7 +389,8 @@ def _roof_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, dt
     settling; properties at the step start): :func:`_layer_step`. What drained goes to work.roof_out [absolute
     amounts], which the channel's top cell receives in the same step."""
     volume = model.zone_area[ROOF] * model.cell_height
-    inflow = np.zeros_like(work.roof_out)
+    inflow = work.roof_in
+    inflow[:] = 0.0
     if feeding:
         rate = model.feed_multiplier * model.zone_feed_fraction[CHANNEL] * model.feed_number_rate
         inflow[NUMBER] = rate / volume

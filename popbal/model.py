@@ -47,8 +47,8 @@ class Model:
     grid: the sections (original droplet volume). cells J, cell_height dz [m], z (J,) cell centres [m].
     zone_area (4,) [m^2]: channel, outer, roof, bottom; the layers' are their volume per cell height (A_L delta / dz
     and A_box h_b / dz), so that their one cell (the top, the bottom) holds the layer's volume (0: no such layer).
-    bottom_thickness h_b [m]. roof_thickness delta [m] and
-    roof_coefficient / roof_radius (J,): the roof cell's cloud law (c_L, delta in the top cell, 0 below). feed_number_rate (K,) [1/s]: droplets fed per second per section.
+    bottom_thickness h_b [m]. roof_thickness delta [m] and roof_coefficient / roof_radius (J,): the roof cell's cloud
+    law (c_L, delta in the top cell, 0 below). feed_number_rate (K,) [1/s]: droplets fed per second per section.
     zone_feed_fraction (2,) [-]. feed_multiplier [-] and feed_end [s]: the feed is feed_multiplier x the case's rate
     while t < feed_end. downflow (J,) [m/s]: slag velocity at each cell's lower face; sink_rate (J,) [1/s]: slag
     withdrawal per unit volume. velocity_table (K, M) [m/s] single-droplet settling velocity over age, age_step [s].
@@ -267,8 +267,8 @@ def bottom_layer(case: Case, channel_radius: float) -> float:
     if p.bottom_layer_factor is None:
         return 0.0
     if channel_radius == 0.0:
-        raise CaseError(f"popbal.bottom_layer_factor = {p.bottom_layer_factor!r}: the bottom layer's thickness is set by "
-                        "the channel radius; allowed only with a channel zone (popbal.channel_radius_factor > 0)")
+        raise CaseError(f"popbal.bottom_layer_factor = {p.bottom_layer_factor!r}: the bottom layer's thickness is "
+                        "set by the channel radius; allowed only with a channel zone (popbal.channel_radius_factor > 0)")
     thickness = p.bottom_layer_factor * channel_radius
     if thickness > g.height / 2:
         raise CaseError(f"popbal.bottom_layer_factor = {p.bottom_layer_factor!r}: the bottom layer ({thickness:.4g} m "

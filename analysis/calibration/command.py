@@ -37,7 +37,9 @@ def run_set(args) -> int:
     text = result.summary()
     print(text)
     if out is not None:
-        data = {"closures": result.closures, "roof": result.roof, "leave_out": leave_out, "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values, "radius_factor": result.radius_factor,
+        data = {"closures": result.closures, "roof": result.roof, "leave_out": leave_out,
+                "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values,
+                "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,
                 "coverage": result.coverage,
                 "levels": [{k: v for k, v in fit.__dict__.items()} for fit in result.levels]}

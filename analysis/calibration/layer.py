@@ -65,9 +65,10 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
              f"fraction {k_r['core_fraction']:.4g} in the zone diagnostics of {', '.join(k_r['runs'])}"]
     if result.roof:
         r = result.roof
-        lines += [f"roof_layer_coefficient = {r['coefficient']!r}  # - [derived] the geometric mean of j mu / (drho g I^2)"
-                  f" over the roof layers of {', '.join(r['runs'])} (zones.csv)",
-                  f"roof_thickness = {r['thickness']!r}  # m [derived] the mean roof thickness of {', '.join(r['runs'])}"]
+        lines += [f"roof_layer_coefficient = {r['coefficient']!r}  # - [derived] the geometric mean of "
+                  f"j mu / (drho g I^2) over the roof layers of {', '.join(r['runs'])} (zones.csv)",
+                  f"roof_thickness = {r['thickness']!r}  # m [derived] the mean roof thickness of "
+                  f"{', '.join(r['runs'])}"]
     for fit in result.levels:
         for name in fit.parameters:
             lines.append(f"{name} = {fit.estimates[name]!r}  # - [derived] level {fit.level}: fit to "
