@@ -50,3 +50,13 @@ def test_every_regenerated_run_ran_one_engine():
     trees = {f.name: json.dumps(_info(f)["engine_trees"], sort_keys=True) for f in STORED
              if f.name not in AWAITING_REGENERATION}
     assert len(trees) >= 3 and len(set(trees.values())) == 1, trees
+
+
+#: What all of data/reference/ may hold [bytes] (issue 21's storage budget: 40 MB).
+STORAGE_LIMIT = 40_000_000
+
+
+def test_the_reference_set_stays_within_its_storage_budget():
+    folder = ROOT / "data" / "reference"
+    total = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
+    assert total <= STORAGE_LIMIT, f"data/reference holds {total / 1e6:.2f} MB, over {STORAGE_LIMIT / 1e6:g} MB"
