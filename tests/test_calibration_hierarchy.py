@@ -10,7 +10,8 @@ import pytest
 
 from analysis.calibration.fit import fit_level
 from analysis.calibration.registry import RegistryError, load_registry, refuse_holdouts
-from analysis.calibration.targets import TARGET_COLUMNS, Target, effective_count, within_run_errors
+from analysis.calibration.targets import (TARGET_COLUMNS, Target, effective_count, scored_window, window_means, window_of,
+                                        within_run_errors)
 
 COLUMNS = tuple(TARGET_COLUMNS)
 
@@ -41,6 +42,21 @@ def test_window_mean_error_of_an_autocorrelated_series_matches_its_replicates():
     actual = float(np.std(means, ddof=1))
     assert np.mean(estimates) == pytest.approx(actual, rel=0.15)
     assert effective_count(80, 0.6) == pytest.approx(20.0)
+
+
+def test_the_scored_window_is_the_steady_windows_last_part_so_a_late_settling_start_is_not_scored():
+    """A run whose droplet count is steady from 30 s while nothing reaches the floor before 45 s (deep's feed), then
+    settles 0.1 g/s to its end at 120 s: the scored window is 90-120 s, and the settling flux over it is the late
+    slope 1e-4 kg/s to 1e-9 (the window's first 30 s would give 1e-4 x 15 / 30, half of it)."""
+    t = np.arange(0.0, 120.05, 0.1)
+    count = np.where(t < 30.0, 5000.0 * t / 30.0, 5000.0)
+    settled = 1e-4 * np.clip(t - 45.0, 0.0, None)
+    frame = pd.DataFrame({"time": t, "droplet_count": count, "mean_diameter": 6e-4 + 0.0 * t,
+                          "channel_velocity": 6e-3 + 0.0 * t, "mass_settled": settled})
+    (start, end), steady = scored_window(frame, 30.0)
+    assert steady and (start, end) == (pytest.approx(90.0), pytest.approx(120.0))
+    assert window_means(frame, (start, end))["settling_flux"] == pytest.approx(1e-4, rel=1e-9)
+    assert window_of(frame)[0][0] <= 35.0  # the count's own steady window starts early: the cap takes its end
 
 
 def _targets(model, truth, names, rng, relative=0.01):
