@@ -36,6 +36,9 @@ CYCLE = 5.0
 STEADY_TOLERANCE = 0.02
 #: Whole cycles the steady window must hold [-].
 STEADY_CYCLES = 3
+#: (coarse, fine) runs of the resolution checks in :func:`report`: the same case at 5 mm and finer cells.
+RESOLUTION_PAIRS = (("deep", "deep_fine"), ("demo", "demo_cell_33"), ("demo", "demo_cell_25"),
+                    ("demo_feed_half", "demo_feed_half_fine"), ("demo_feed_double", "demo_feed_double_fine"))
 
 
 def steady_window(timeseries: pd.DataFrame, column: str = "droplet_count", cycle: float = CYCLE,
@@ -115,6 +118,23 @@ def run_summary(run) -> dict:
             "end_time": float(last["time"])}
 
 
+def pair_scatter(first: pd.DataFrame, second: pd.DataFrame) -> tuple[tuple[float, float], dict[str, float]]:
+    """The seed scatter of two time series of one case over one window: both cut to their common span, the window
+    from the later of their steady starts (the last third where a run has none) to the span's end; ((start, end)
+    [s], :func:`seed_scatter` of their :data:`STEADY_COLUMNS` means). Two runs of different lengths compared over
+    their own windows would score start-up as seed scatter."""
+    end = min(float(first["time"].iloc[-1]), float(second["time"].iloc[-1]))
+    cut = [s[s["time"] <= end + 1e-9] for s in (first, second)]
+    starts = []
+    for series in cut:
+        found = steady_window(series)
+        starts.append(found["start"] if math.isfinite(found["start"]) else end * 2.0 / 3.0)
+    window = (max(starts), end)
+    columns = [c for c in STEADY_COLUMNS if c in cut[0] and c in cut[1]]
+    means = [steady_means(series, columns, *window) for series in cut]
+    return window, seed_scatter(means[0], means[1])
+
+
 def density_line(droplets: pd.DataFrame) -> tuple[float, float]:
     """Least-squares line density = a + b z of a snapshot's droplets: (a [kg/m^3], b [kg/m^4]) (seed paper Fig. 20)."""
     b, a = np.polyfit(droplets["z"].to_numpy(), droplets["density"].to_numpy(), 1)
@@ -140,28 +160,30 @@ def report(root="data/reference") -> str:
                      f"{1e3 * s['sauter_diameter']:.3f} | {1e3 * s['channel_radius']:.1f} | "
                      f"{1e3 * s['channel_velocity']:.1f} | {s['settled_fraction']:.3f} | {s['end_time']:g}")
     for first, second in (("simple", "simple_seed2"), ("cubic", "cubic_seed2")):
-        if first in summaries and second in summaries:
-            scatter = seed_scatter({k: summaries[first][k] for k in STEADY_COLUMNS if k in summaries[first]},
-                                   summaries[second])
-            lines.append(f"seed scatter {second} vs {first}: "
+        if first in runs and second in runs:
+            window, scatter = pair_scatter(runs[first].timeseries, runs[second].timeseries)
+            lines.append(f"seed scatter {second} vs {first} over {window[0]:.0f}-{window[1]:.0f} s: "
                          + ", ".join(f"{k} {100 * v:+.1f} %" for k, v in scatter.items()))
-    if "deep" in runs:
-        run = runs["deep"]
+    for name in ("deep", "deep_fine"):
+        if name not in runs:
+            continue
+        run = runs[name]
         t, frame = run.droplets()
         axis = run.case.inlet_center
         for low, high in ((0.15, 0.35),):
             rim = rim_share(frame, axis, low, high)
-            lines.append(f"deep rim test at t = {t:g} s, z {low}-{high} m: {rim['rim']} of {rim['outside']} droplets "
+            lines.append(f"{name} rim test at t = {t:g} s, z {low}-{high} m: {rim['rim']} of {rim['outside']} droplets "
                          f"beyond 2 r_half = {2e3 * rim['half_volume_radius']:.1f} mm never merged and older than "
                          f"2 x the median age {rim['median_age']:.1f} s: share {rim['share']:.3f}")
         a, b = density_line(frame)
-        lines.append(f"deep density line at t = {t:g} s: {a:.0f} + {b:.0f} z kg/m^3 (z in m above the bottom)")
-    if "kernel" in runs:
-        e = kernel_run_efficiency(root / "kernel")
-        lines.append(f"kernel collision efficiency E = {e['efficiency']:.3f} +- {e['standard_error']:.3f} ({e['merges']} "
-                     f"merges against {e['expected_collisions']:.0f} gravitational collisions over {e['snapshots']} "
-                     f"snapshots; quadrature error {e['quadrature_error']:.3f})")
-    for coarse, fine in (("deep", "deep_fine"), ("demo", "demo_cell_33"), ("demo", "demo_cell_25")):
+        lines.append(f"{name} density line at t = {t:g} s: {a:.0f} + {b:.0f} z kg/m^3 (z in m above the bottom)")
+    for name in ("kernel", "kernel_ratio4"):
+        if name in runs:
+            e = kernel_run_efficiency(root / name)
+            lines.append(f"{name} collision efficiency E = {e['efficiency']:.3f} +- {e['standard_error']:.3f} "
+                         f"({e['merges']} merges against {e['expected_collisions']:.0f} gravitational collisions over "
+                         f"{e['snapshots']} snapshots; quadrature error {e['quadrature_error']:.3f})")
+    for coarse, fine in RESOLUTION_PAIRS:
         if coarse in runs and fine in runs:
             end = min(summaries[fine]["end_time"], summaries[coarse]["end_time"])
             start = end * 2.0 / 3.0
@@ -174,7 +196,27 @@ def report(root="data/reference") -> str:
     return "\n".join(lines)
 
 
+def main(argv=None) -> int:
+    """``python -m analysis.evidence [ROOT]``: print :func:`report`. Exit status 0, 2 for a ROOT that holds no
+    stored reference run."""
+    import argparse
+    import sys
+    from pathlib import Path
+
+    parser = argparse.ArgumentParser(prog="python -m analysis.evidence", description=report.__doc__.split(".")[0])
+    parser.add_argument("root", nargs="?", default="data/reference",
+                        help="folder of stored reference runs (default: data/reference)")
+    args = parser.parse_args(argv)
+    root = Path(args.root)
+    if not root.is_dir() or not any((p / "reference.json").is_file() for p in root.iterdir()):
+        print(f"{parser.prog}: error: {root} holds no stored reference run (no <name>/reference.json)",
+              file=sys.stderr)
+        return 2
+    print(report(root))
+    return 0
+
+
 if __name__ == "__main__":
     import sys
 
-    print(report(sys.argv[1] if len(sys.argv) > 1 else "data/reference"))
+    sys.exit(main())

@@ -97,3 +97,20 @@ def test_stored_kernel_runs_give_their_efficiency_at_their_own_sizes():
         stokes = (stokes_velocity(sizes[1], case.matte.density, case.slag.density, case.slag_viscosity)
                   - stokes_velocity(sizes[0], case.matte.density, case.slag.density, case.slag_viscosity))
         assert 0.75 * stokes < read["velocity_difference"] <= 1.02 * stokes, (run, read["velocity_difference"], stokes)
+
+
+def test_seed_scatter_of_runs_of_different_lengths_is_taken_over_their_common_span():
+    """Two runs of one seed (equal series) where the first goes on to 75 s and its count keeps rising after 30 s:
+    over their common span the scatter of every column is 0 to round-off, where comparing each run's own window
+    (the first's 50-75 s against the second's 20-30 s) would report the rise, +50 % here, as seed scatter."""
+    from analysis.evidence import STEADY_COLUMNS, pair_scatter
+
+    t = np.arange(0.0, 75.05, 0.1)
+    count = np.where(t < 10.0, 1000.0 * t / 10.0, 1000.0) * np.where(t > 30.0, 1.0 + (t - 30.0) / 45.0 * 0.8, 1.0)
+    first = pd.DataFrame({"time": t, **{c: 1.0 + 0.0 * t for c in STEADY_COLUMNS}, "droplet_count": count})
+    second = first[first["time"] <= 30.0 + 1e-9].copy()
+    window, scatter = pair_scatter(first, second)
+    assert window[1] == pytest.approx(30.0) and window[0] >= 10.0
+    assert scatter and all(abs(v) < 1e-12 for v in scatter.values())
+    own = first[first["time"] > 50.0]["droplet_count"].mean() / second[second["time"] > 20.0]["droplet_count"].mean()
+    assert own - 1.0 > 0.4
