@@ -67,6 +67,16 @@ def steady_window(timeseries: pd.DataFrame, column: str = "droplet_count", cycle
     return {"start": math.nan, "cycles": 0, "mean": math.nan, "block_means": [], "spread": math.nan}
 
 
+def window_of(series: pd.DataFrame) -> tuple[tuple[float, float], bool]:
+    """((start, end) [s], steady?) of a time series: its steady window (:func:`steady_window`), else its last
+    third (``steady`` False)."""
+    end = float(series["time"].iloc[-1])
+    found = steady_window(series)
+    if math.isfinite(found["start"]):
+        return (float(found["start"]), end), True
+    return (end * 2.0 / 3.0, end), False
+
+
 def steady_means(timeseries: pd.DataFrame, columns, start: float, end: float | None = None) -> dict[str, float]:
     """The mean of each of ``columns`` over the rows with start < time <= end (end: the last) [their units]."""
     t = timeseries["time"]
@@ -108,8 +118,7 @@ def run_summary(run) -> dict:
     over it (over the last third where no window is steady: ``steady`` False)."""
     series = run.timeseries
     window = steady_window(series)
-    steady = math.isfinite(window["start"])
-    start = window["start"] if steady else float(series["time"].iloc[-1]) * 2.0 / 3.0
+    (start, _), steady = window_of(series)
     means = steady_means(series, [c for c in STEADY_COLUMNS if c in series], start)
     last = series.iloc[-1]
     fed = float(last["mass_fed"])
@@ -118,18 +127,20 @@ def run_summary(run) -> dict:
             "end_time": float(last["time"])}
 
 
-def pair_scatter(first: pd.DataFrame, second: pd.DataFrame) -> tuple[tuple[float, float], dict[str, float]]:
-    """The seed scatter of two time series of one case over one window: both cut to their common span, the window
-    from the later of their steady starts (the last third where a run has none) to the span's end; ((start, end)
-    [s], :func:`seed_scatter` of their :data:`STEADY_COLUMNS` means). Two runs of different lengths compared over
-    their own windows would score start-up as seed scatter."""
+def pair_window(first: pd.DataFrame, second: pd.DataFrame) -> tuple[tuple[float, float], list[pd.DataFrame]]:
+    """The window over which two time series of one case (two seeds) are compared: both cut to their common span,
+    from the later of their steady starts (:func:`steady_window`; the last third where a run has none) to the span's
+    end. Returns ((start, end) [s], [first, second] cut). Two runs of different lengths compared over their own
+    windows would score start-up as seed scatter."""
     end = min(float(first["time"].iloc[-1]), float(second["time"].iloc[-1]))
     cut = [s[s["time"] <= end + 1e-9] for s in (first, second)]
-    starts = []
-    for series in cut:
-        found = steady_window(series)
-        starts.append(found["start"] if math.isfinite(found["start"]) else end * 2.0 / 3.0)
-    window = (max(starts), end)
+    return (max(window_of(series)[0][0] for series in cut), end), cut
+
+
+def pair_scatter(first: pd.DataFrame, second: pd.DataFrame) -> tuple[tuple[float, float], dict[str, float]]:
+    """The seed scatter of two time series of one case over :func:`pair_window`: ((start, end) [s],
+    :func:`seed_scatter` of their :data:`STEADY_COLUMNS` means)."""
+    window, cut = pair_window(first, second)
     columns = [c for c in STEADY_COLUMNS if c in cut[0] and c in cut[1]]
     means = [steady_means(series, columns, *window) for series in cut]
     return window, seed_scatter(means[0], means[1])

@@ -37,6 +37,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.evidence import pair_window, window_of
+
 #: The columns scored: name -> (unit, meaning).
 TARGET_COLUMNS: dict[str, tuple[str, str]] = {
     "droplet_count": ("-", "droplets in the slag"),
@@ -66,17 +68,6 @@ class Target:
     within: dict[str, float] = field(default_factory=dict)  # se_within per column
     seed: dict[str, float] = field(default_factory=dict)  # se_seed per column
     effective_blocks: dict[str, float] = field(default_factory=dict)
-
-
-def window_of(series: pd.DataFrame) -> tuple[tuple[float, float], bool]:
-    """((start, end) [s], steady?) of a time series: its steady window, else its last third."""
-    from analysis.evidence import steady_window
-
-    end = float(series["time"].iloc[-1])
-    found = steady_window(series)
-    if math.isfinite(found["start"]):
-        return (float(found["start"]), end), True
-    return (end * 2.0 / 3.0, end), False
 
 
 def scored_window(series: pd.DataFrame, max_window: float = MAX_WINDOW) -> tuple[tuple[float, float], bool]:
@@ -155,12 +146,7 @@ def seed_scatter(reference_dir: str | Path = "data/reference") -> dict[str, floa
     for first, second in SEED_PAIRS:
         if not ((root / first / "timeseries.csv").is_file() and (root / second / "timeseries.csv").is_file()):
             continue
-        a, b = load_run(root / first).timeseries, load_run(root / second).timeseries
-        end = min(float(a["time"].iloc[-1]), float(b["time"].iloc[-1]))  # the pair over their common span
-        a, b = a[a["time"] <= end + 1e-9], b[b["time"] <= end + 1e-9]
-        (start_a, end_a), _ = window_of(a)
-        (start_b, end_b), _ = window_of(b)
-        window = (max(start_a, start_b), min(end_a, end_b))
+        window, (a, b) = pair_window(load_run(root / first).timeseries, load_run(root / second).timeseries)
         if window[1] - window[0] < 3 * BLOCK:
             continue
         mean_a, mean_b = window_means(a, window), window_means(b, window)
