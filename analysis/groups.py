@@ -5,7 +5,8 @@
 ==========================  ==========================================================================================
 ``stokes_velocity``         U_s [m/s]: Stokes velocity of the mean fed droplet, (rho_m - rho_s) g d^2 / (18 mu)
 ``droplet_reynolds``        Re_d = rho_s U_s d / mu [-]
-``feed_flux``               J [m/s]: matte volume fed per second over the inlet disk's area
+``feed_flux``               J [m/s]: matte volume fed per second over the inlet's area (a disk, or a slot's
+                            rectangle; for a slot the plume groups below are NaN: it feeds a row of channels)
 ``kynch_ratio``             J / (0.0715 U_s) [-]: above 1 the feed exceeds the largest settling flux of a
                             Richardson-Zaki suspension (n = 4.65, peak at phi = 0.177), so a roof layer must build
                             up under the inlet (Kynch)
@@ -64,6 +65,12 @@ def design_groups(case) -> dict[str, float]:
     from popbal.model import column_radius
 
     radius = column_radius(case)
+    if case.inlet_is_slot:  # a row of channels: the single axisymmetric plume's laws do not apply
+        flux = q / case.inlet_area
+        return {"stokes_velocity": u_s, "droplet_reynolds": rho_s * u_s * d / mu, "feed_flux": flux,
+                "kynch_ratio": flux / (KYNCH_PEAK * u_s), "column_radius": radius, "column_to_inlet": math.nan,
+                "confinement_factor": math.nan, "plume_velocity": math.nan, "plume_reynolds": math.nan,
+                "aspect": case.geometry.height / case.geometry.width}
     flux = q / (math.pi * a * a) if a > 0.0 else math.nan
     c = confinement_factor(radius / a) if a > 0.0 else math.nan
     w0 = math.sqrt(c * q * drho * g / (math.pi * mu)) if q > 0.0 else 0.0

@@ -131,6 +131,10 @@ def setup(case: str | os.PathLike | Case, overrides: dict | list | None = None, 
 def build(case: Case) -> Model:
     """Arrays and parameters of the reduced model for a validated case."""
     g, p, f, c = case.geometry, case.popbal, case.feed, case.coalescence
+    if case.inlet_is_slot:
+        raise CaseError(f"geometry.inlet_length = {g.inlet_length!r} m: popbal models a disk inlet under which one "
+                        "axisymmetric channel forms; a slot feeds a row of channels, which the reduced model does not "
+                        "represent; allowed: no inlet_length (a disk of inlet_diameter)")
     box_area = g.width * g.depth
     inlet_radius = 0.5 * g.inlet_diameter
     channel_radius, plume_velocity, reynolds, transport = channel_closure(case)
