@@ -579,11 +579,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--leave-out", default=None, metavar="FAMILY",
                         help="with --set: leave-one-family-out cross-validation, the registry's [families] FAMILY "
                              "held out as well (fitted on the rest, scored with the hold-outs); not with --write")
-    parser.add_argument("--closures", default="designed", choices=("designed", "layers"),
-                        help="with --set: the closure set fitted: 'designed' (plume and return flow, the stored "
-                             "designed.toml) or 'layers' (with popbal's roof and bottom layers: the roof law from the "
-                             "zone diagnostics, the bottom layer's thickness factor fitted in place of the return "
-                             "flow; analysis.calibration.hierarchy.CLOSURES); default designed")
+    parser.add_argument("--closures", default="designed", choices=("designed", "layers", "busy"),
+                        help="with --set: the closure set fitted: 'designed' (plume and return flow), 'layers' "
+                             "(with popbal's roof and bottom layers: the roof law from the zone diagnostics, the "
+                             "bottom layer's thickness factor fitted in place of the return flow) or 'busy' "
+                             "('designed' with popbal.busy_partners: one merge at a time per droplet, each taking the "
+                             "full engine's growth time); analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
                              "no bands, the errors only)")

@@ -327,7 +327,7 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
                 work.volume_fraction[zone], work.shear[zone], grid.pivots, grid.target, grid.loss_weight, dt,
                 p["density_slag"], p["interfacial_tension"], p["psi"], p["virtual_mass"], p["form"],
                 p["threshold"], p["rule"], p["efficiency"], p["speed_limit"], p["max_rate_step"], work.beta,
-                work.births, work.k1, work.k2, work.trial))
+                work.births, work.k1, work.k2, work.trial, p["busy_partners"], p["growth_target"], p["growth_rate"]))
         removed = react_zone(content[zone], grid.pivots, grid.diameters, model.reacting, model.x_initial,
                              model.x_final, model.time_constant, dt)
         books.reacted += removed * dz * area

@@ -415,9 +415,46 @@ def collision_pairs(sections, count, diameters, velocities, densities, shear_rat
 
 
 @njit(cache=True)
+def growth_time(diameter_a, diameter_b, growth_target, growth_rate):
+    """The full engine's growth time [s] of a marked pair (fulldem.submodels.coalescence): the smaller partner's
+    contact diameter grows by growth_rate d_m per second [1/s] until growth_target d_m, d_m the merged diameter."""
+    merged = (diameter_a**3 + diameter_b**3) ** (1.0 / 3.0)
+    small = min(diameter_a, diameter_b)
+    return max(growth_target * merged - small, 0.0) / (growth_rate * merged)
+
+
+@njit(cache=True)
+def busy_discount(number, diameters, growth_target, growth_rate, beta, pair_j, pair_k, pairs, pair_beta, load):
+    """Discount a cell's kernel for partners that are busy: one merge at a time, each taking the pair's growth time.
+
+    In the full engine a marked pair merges only after its growth time t_jk (:func:`growth_time`) and neither
+    partner can be marked again before, so a droplet of section j is free a share f_j = 1 / (1 + L_j) of the time,
+    L_j = sum_k beta_jk N_k t_jk its merges per second times their duration (a handling time, as in Holling's type-II
+    response; frozen over the step). Each listed pair's kernel becomes beta_jk f_j f_k, in ``pair_beta`` and in
+    ``beta`` (K, K) alike. number (K,) [1/m^3], diameters (K,) [m]; load (K,) is work space. A collector falling
+    through a dense cloud meets partners far faster than it can merge with them, which a mean-field kernel would
+    otherwise let it do at once.
+    """
+    load[:] = 0.0
+    for p in range(pairs):
+        j, k = pair_j[p], pair_k[p]
+        t = growth_time(diameters[j], diameters[k], growth_target, growth_rate)
+        load[j] += pair_beta[p] * number[k] * t
+        if k != j:
+            load[k] += pair_beta[p] * number[j] * t
+    for p in range(pairs):
+        j, k = pair_j[p], pair_k[p]
+        b = pair_beta[p] / ((1.0 + load[j]) * (1.0 + load[k]))
+        pair_beta[p] = b
+        beta[j, k] = b
+        beta[k, j] = b
+
+
+@njit(cache=True)
 def coalesce_zone(content, diameters, velocities, densities, volume_fraction, shear_rate, pivots, target,
                   loss_weight, dt, density_slag, interfacial_tension, psi, virtual_mass, form, threshold, rule,
-                  efficiency, speed_limit, max_rate_step, beta, births, k1, k2, trial):
+                  efficiency, speed_limit, max_rate_step, beta, births, k1, k2, trial, busy=False,
+                  growth_target=0.95, growth_rate=2.0):
     """Coalescence in every occupied cell of one zone over dt [s]; returns the largest number of sub-steps.
 
     content (J, Q, K) in place; diameters, velocities, densities (J, K) and volume_fraction (J,) from
@@ -425,10 +462,12 @@ def coalesce_zone(content, diameters, velocities, densities, volume_fraction, sh
     loss_weight from the grid. Cells below NEGLIGIBLE_VOLUME_FRACTION are skipped (the far tails the upwind scheme
     spreads ahead of a front, whose coalescence rate ~ phi^2 is nil). beta (K, K), births (Q + 1, K), k1, k2,
     trial (Q, K) are work space; the section and pair lists (K and K (K + 1) / 2 entries) are allocated once per
-    call, outside the cell loop.
+    call, outside the cell loop. ``busy``: discount the kernel for partners busy merging (:func:`busy_discount`,
+    with the full engine's coalescence.growth_target [-] and growth_rate [1/s]).
     """
     n_k = pivots.size
     size = n_k * (n_k + 1) // 2
+    load = np.empty(n_k)
     sections = np.empty(n_k, np.int64)
     pair_j, pair_k, pair_target = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64)
     pair_beta = np.empty(size)
@@ -440,6 +479,9 @@ def coalesce_zone(content, diameters, velocities, densities, volume_fraction, sh
         pairs = collision_pairs(sections, count, diameters[j], velocities[j], densities[j], shear_rate[j],
                                 density_slag, interfacial_tension, psi, virtual_mass, form, threshold, rule,
                                 efficiency, speed_limit, target, beta, pair_j, pair_k, pair_target, pair_beta)
+        if busy:
+            busy_discount(content[j, NUMBER], diameters[j], growth_target, growth_rate, beta, pair_j, pair_k, pairs,
+                          pair_beta, load)
         steps = coalesce_cell(content[j], pivots, sections, count, target, loss_weight, beta, pair_j, pair_k,
                               pair_target, pair_beta, pairs, dt, max_rate_step, births, k1, k2, trial)
         most = max(most, steps)

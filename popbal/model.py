@@ -244,6 +244,9 @@ def build(case: Case) -> Model:
         "density_slag": case.slag.density,
         "max_rate_step": 0.5,
         "speed_limit": speed_limit,
+        "busy_partners": bool(p.busy_partners),
+        "growth_target": c.growth_target,
+        "growth_rate": c.growth_rate,
     }
     ratio = p.return_flow_ratio or 0.0
     if ratio > 0.0 and (channel_area == 0.0 or zone_area[OUTER] <= 0.0):

@@ -281,6 +281,13 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                     "u_up = r S(R/R_c) u_s, so channel_coefficient and return_flow_ratio become "
                                     "multipliers of the laws (1: as derived; popbal.closures); absent or false: "
                                     "constants.", optional=True),
+        "busy_partners": Field(B, "", "true: a droplet merges with one partner at a time, as in the full engine's "
+                                      "delayed coalescence, where a marked pair is busy for its growth time t_jk = "
+                                      "max(growth_target d_m - d_small, 0) / (growth_rate d_m) (coalescence keys): "
+                                      "each partner's kernel is discounted by the share of time it is free, "
+                                      "f_j = 1 / (1 + sum_k beta_jk N_k t_jk) (a handling time; popbal.kernels."
+                                      "busy_discount); absent or false: every collision can merge at once.",
+                               optional=True),
     },
 }
 del F, I, B, S, L

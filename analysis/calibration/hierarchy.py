@@ -39,9 +39,12 @@ LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "return_flow_ratio"),
 #: and bottom layers are on ('layers': the roof law's c_L and thickness from the zone diagnostics, not fitted, the
 #: bottom layer's thickness factor fitted with the plume in place of the return flow, which carries no droplets
 #: where the bottom layer takes everything that reaches the floor; popbal.closures).
+#: 'busy' is 'designed' with popbal.busy_partners on: droplets merge one partner at a time, each merge taking the
+#: full engine's growth time (a switch taken from the engine's coalescence rule, not fitted; popbal.kernels).
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers": {"levels": {"transport": ("channel_coefficient", "bottom_layer_factor"),
-                                  "whole": ("shear_coefficient",)}, "layers": True}}
+                                  "whole": ("shear_coefficient",)}, "layers": True},
+            "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": {"popbal.busy_partners": True}}}
 START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
          "bottom_layer_factor": 1.0}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
@@ -197,7 +200,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
 
     transport_runs, missing["transport"] = _stored(registry.levels.get("transport", ()), reference_dir)
     k_r = radius_factor_from_zones(transport_runs, reference_dir)
-    fixed = {**FORM, "popbal.channel_radius_factor": k_r["value"],
+    fixed = {**FORM, **CLOSURES[closures].get("switches", {}), "popbal.channel_radius_factor": k_r["value"],
              "popbal.collision_efficiency": collision["efficiency"]}
     roof = None
     if CLOSURES[closures]["layers"]:

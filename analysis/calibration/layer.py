@@ -12,7 +12,7 @@ from pathlib import Path
 
 from settler.output import OutputError, atomic_write_text, source_commit
 
-from .hierarchy import FORM, TARGETS, Hierarchy
+from .hierarchy import CLOSURES, FORM, TARGETS, Hierarchy
 
 
 def _q(text) -> str:
@@ -75,6 +75,9 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
                          f"{', '.join(fit.runs)}, standard error {fit.standard_errors[name]:.3g}")
     for key, value in FORM.items():
         lines.append(f"{key.split('.', 1)[1]} = {_q(value)}  # [chosen] the closure form of every level")
+    for key, value in CLOSURES[result.closures].get("switches", {}).items():
+        lines.append(f"{key.split('.', 1)[1]} = {str(value).lower()}  # [chosen] closures = {result.closures!r}: "
+                     "the full engine's one-partner-at-a-time merging, not fitted")
     lines += ["", "[provenance]", f"command = {_q(command or 'settler calibrate --set')}",
               f"code_commit = {_q(commit['commit'])}", f"code_tree_dirty = {str(bool(commit['dirty'])).lower()}",
               f"date = {_q(datetime.date.today().isoformat())}", f"registry = {_q(_portable(registry_path))}",
