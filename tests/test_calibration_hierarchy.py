@@ -325,3 +325,27 @@ def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command
             assert again["popbal"][key] == (pytest.approx(value, rel=1e-9) if isinstance(value, float) else value), key
     finally:
         subprocess.run(["git", "-C", str(root), "worktree", "remove", "--force", str(checkout)], capture_output=True)
+
+
+def test_a_run_is_scored_under_the_fitted_closures_alone_as_the_written_layer_is_applied():
+    """simple's resolved case.toml carries the paper layer's keys (plume_reynolds_scale among them); the calibration
+    scores it with those keys gone, exactly as `case.calibration=designed` applies the written layer."""
+    import tomllib
+    from pathlib import Path
+
+    import popbal
+    from analysis.calibration.fit import reduced_means
+    from settler.cases import load_case
+
+    root = Path(__file__).resolve().parents[1]
+    case_file = root / "data" / "reference" / "simple" / "case.toml"
+    assert load_case(case_file).popbal.plume_reynolds_scale is not None  # the paper layer's key is in the file
+    layer = tomllib.loads((root / "data" / "calibration" / "designed.toml").read_text())["popbal"]
+    target = Target(name="simple", window=(2.0, 4.0), steady=True, means={}, standard_errors={})
+    fixed = {f"popbal.{k}": v for k, v in layer.items()}
+    scored = reduced_means(target, case_file, {}, fixed)
+    applied = load_case(case_file, {"case.calibration": "designed", "popbal.end_time": 4.0,
+                                    "popbal.output_interval": 0.5})
+    assert applied.popbal.plume_reynolds_scale is None
+    expected = window_means(popbal.run(popbal.setup(applied), progress=False).timeseries, (2.0, 4.0))
+    assert scored == expected
