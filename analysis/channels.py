@@ -1,14 +1,19 @@
 """How many channels a slab's feed forms: the downflow sheets of a wide slab fed over a slot (issue 21's wide slab,
 ``geometry.inlet_length``), counted from the vertical slag velocity along x.
 
-At a height z the slag velocity w(x) (averaged over the slab's thickness y, or on its central x-z plane where only
+Two measures, because a slab's downflow need not be a row of columns. **By the droplets**: at mid-height (the band
+of :data:`settler.output.MID_BAND` of the height) the droplet volume is binned along x in cells of the grid, and a
+channel is a maximal run of bins holding at least :data:`DROPLET_SHARE` of the fullest bin's volume
+(:func:`droplet_runs`): one run is one curtain, however long. **By the slag**: at a height z the slag velocity w(x) (averaged over the slab's thickness y, or on its central x-z plane where only
 that is stored) is split into maximal runs of downflow (w < 0) between rising return flow; a **channel** is a run
 that carries at least :data:`MIN_SHARE` of the total downflow integral of max(-w, 0) dx at that height, so that a
 one-cell flicker of the return flow is not counted. The count at mid-height is the slab's channel count, the measure
 of the channel radius and axis velocity of a single plume (:mod:`settler.output`) having no meaning there; the
 counts at a quarter and three quarters of the height say whether channels join or split on the way down.
 
-    python -m analysis.channels RUN_OR_REFERENCE     # a run folder (every slag snapshot) or a stored reference
+    python -m analysis.channels RUN_OR_REFERENCE [--figure PATH]
+                 # a run folder (every slag snapshot) or a stored reference; --figure draws the mid-height slag
+                 # velocity along x against time with the channels found, and the counts against time
 """
 
 from __future__ import annotations
@@ -23,6 +28,49 @@ import numpy as np
 MIN_SHARE = 0.05
 #: Heights at which channels are counted, as fractions of the slag height [-].
 HEIGHTS = (0.25, 0.5, 0.75)
+#: Share of the fullest x bin's droplet volume a bin must hold to belong to a channel [-] (chosen: a curtain's own
+#: bins hold 0.7-1 of the fullest in the stored slab, the return flow beside it under 0.15).
+DROPLET_SHARE = 0.25
+
+
+def droplet_runs(x, volume, lower: float, upper: float, bin_width: float,
+                 share: float = DROPLET_SHARE) -> list[tuple[float, float]]:
+    """The channels of a band of droplets by where their volume lies along x: droplet centres ``x`` [m] and volumes
+    ``volume`` [m^3] binned over [lower, upper] [m] in bins ``bin_width`` [m] wide; each maximal run of bins holding
+    at least ``share`` of the fullest bin and, together, at least :data:`MIN_SHARE` of the band's volume is one
+    channel (a bin or two of droplets gathered against an end wall is not), returned as its (start, end) [m] (bin
+    edges)."""
+    x, volume = np.asarray(x, dtype=float), np.asarray(volume, dtype=float)
+    bins = max(1, int(round((upper - lower) / bin_width)))
+    held, edges = np.histogram(x, bins=bins, range=(lower, upper), weights=volume)
+    if held.max() <= 0.0:
+        return []
+    full = held >= share * held.max()
+    runs, k = [], 0
+    while k < bins:
+        if full[k]:
+            j = k
+            while j + 1 < bins and full[j + 1]:
+                j += 1
+            if held[k:j + 1].sum() >= MIN_SHARE * held.sum():
+                runs.append((float(edges[k]), float(edges[j + 1])))
+            k = j + 1
+        else:
+            k += 1
+    return runs
+
+
+def droplet_channels(frame, case) -> list[tuple[float, float]]:
+    """:func:`droplet_runs` of a snapshot's droplets (a DataFrame with x, z, diameter [m]) in the mid-height band of
+    ``case``'s box, binned at its cell size."""
+    from settler.output import MID_BAND
+
+    height = case.geometry.height
+    z = np.asarray(frame["z"], dtype=float)
+    band = np.abs(z - 0.5 * height) <= 0.5 * MID_BAND * height
+    volume = np.pi / 6.0 * np.asarray(frame["diameter"], dtype=float) ** 3
+    return droplet_runs(np.asarray(frame["x"], dtype=float)[band], volume[band], 0.0, case.geometry.width,
+                        case.fulldem.cell_size)
 
 
 def downflow_runs(x, w, min_share: float = MIN_SHARE) -> list[dict]:
@@ -75,7 +123,9 @@ def count_channels(x, z, w, slag_height: float, bottom: float = 0.0) -> dict:
 def run_counts(folder) -> list[dict]:
     """Channel counts of every slag snapshot of a run folder (the whole field averaged over y) or of the stored
     snapshots of a reference (its central x-z plane): rows of ``time`` [s], ``n_25``, ``n_50``, ``n_75`` (counts at a
-    quarter, half and three quarters of the height) and ``centres_50`` (channel centres at mid-height [m])."""
+    quarter, half and three quarters of the height, by the slag), ``centres_50`` (those channels' centres at
+    mid-height [m]), ``droplet_channels`` and ``extents`` (the channels by the droplets at mid-height, each (start,
+    end) [m])."""
     folder = Path(folder)
     rows = []
     if (folder / "reference.json").is_file():
@@ -88,43 +138,115 @@ def run_counts(folder) -> list[dict]:
                 x, z, v = ref.slag(k)
             except LookupError:
                 continue
-            rows.append(_row(float(t), count_channels(x, z, v[:, 2], height)))
+            rows.append(_row(float(t), count_channels(x, z, v[:, 2], height),
+                             droplet_channels(ref.droplets(k), ref.case)))
         return rows
+    from settler.cases import load_case
+
+    from .files import droplets_file, slag_file, snapshot_files
+
+    case = load_case(folder / "case.toml")
+    for t, drops, fluid in snapshot_files(folder):
+        if fluid is None or drops is None:
+            continue
+        centres, velocity = slag_file(fluid)
+        rows.append(_row(float(t), count_channels(centres[:, 0], centres[:, 2], velocity[:, 2], case.geometry.height),
+                         droplet_channels(droplets_file(drops), case)))
+    return rows
+
+
+def mid_height_history(folder) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(times (T,) [s], x (X,) [m], w (T, X) [m/s]): the thickness-averaged vertical slag velocity at mid-height of
+    every slag snapshot of a run folder."""
     from settler.cases import load_case
 
     from .files import slag_file, snapshot_files
 
+    folder = Path(folder)
     height = load_case(folder / "case.toml").geometry.height
+    times, rows, xs = [], [], None
     for t, _, fluid in snapshot_files(folder):
         if fluid is None:
             continue
         centres, velocity = slag_file(fluid)
-        rows.append(_row(float(t), count_channels(centres[:, 0], centres[:, 2], velocity[:, 2], height)))
-    return rows
+        x, w = profile_at(centres[:, 0], centres[:, 2], velocity[:, 2], 0.5 * height)
+        xs = x if xs is None else xs
+        times.append(float(t))
+        rows.append(w)
+    return np.array(times), (xs if xs is not None else np.zeros(0)), np.array(rows)
 
 
-def _row(time, counts) -> dict:
-    return {"time": time, **{f"n_{int(round(100 * f))}": len(c) for f, c in counts.items()},
+def draw(folder, path) -> None:
+    """Two panels: the mid-height slag velocity along x against time (downflow red) with each snapshot's channel
+    centres, and the channel counts at a quarter, half and three quarters of the height against time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    times, x, w = mid_height_history(folder)
+    rows = run_counts(folder)
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True, height_ratios=(3, 1.4),
+                                      constrained_layout=True)
+    limit = float(np.nanmax(np.abs(w))) if w.size else 1.0
+    image = top.pcolormesh(times, 1e3 * x, 1e3 * w.T, cmap="RdBu", vmin=-1e3 * limit, vmax=1e3 * limit,
+                           shading="nearest")
+    for r in rows:
+        top.plot([r["time"]] * len(r["centres_50"]), [1e3 * c for c in r["centres_50"]], "k.", ms=4)
+        for a, b in r["extents"]:
+            top.plot([r["time"], r["time"]], [1e3 * a, 1e3 * b], "-", color="0.25", lw=1.5, alpha=0.6)
+    top.set_ylabel("x [mm]")
+    top.set_title("slag velocity at mid-height, averaged over the slab's thickness\n(dots: downflow channels; bars: "
+                  "where the droplets are)", fontsize=10)
+    fig.colorbar(image, ax=top, label="w [mm/s] (negative: down)")
+    for key, label, style in (("droplet_channels", "by the droplets, mid-height", "-k"),
+                              ("n_25", "downflow, 1/4 of the height", ":"), ("n_50", "downflow, mid-height", "-"),
+                              ("n_75", "downflow, 3/4 of the height", "--")):
+        bottom.plot([r["time"] for r in rows], [r[key] for r in rows], style, label=label, drawstyle="steps-mid")
+    bottom.set_xlabel("time [s]")
+    bottom.set_ylabel("channels")
+    bottom.legend(fontsize=7, ncols=2)
+    import io
+
+    from settler.output import atomic_write_bytes
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, dpi=110, format=Path(path).suffix.lstrip(".") or "png")
+    plt.close(fig)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def _row(time, counts, by_droplets) -> dict:
+    return {"time": time, "droplet_channels": len(by_droplets), "extents": by_droplets,
+            **{f"n_{int(round(100 * f))}": len(c) for f, c in counts.items()},
             "centres_50": [round(c["centre"], 4) for c in counts[0.5]]}
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 1:
-        print("usage: python -m analysis.channels RUN_OR_REFERENCE", file=sys.stderr)
-        return 2
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m analysis.channels", description="count a slab's channels")
+    parser.add_argument("run", help="a run folder or a stored reference")
+    parser.add_argument("--figure", default=None, metavar="PATH", help="draw the channels against time (a run folder)")
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    argv = [args.run]
     try:
         rows = run_counts(argv[0])
+        if args.figure:
+            draw(argv[0], args.figure)
     except (OSError, ValueError, LookupError) as exc:
         print(f"analysis.channels: {exc}", file=sys.stderr)
         return 2
     if not rows:
         print(f"analysis.channels: {argv[0]} holds no slag snapshot", file=sys.stderr)
         return 2
-    print("time [s]  channels at 1/4, 1/2, 3/4 of the height   centres at mid-height [mm]")
+    print("time [s]  by the droplets at mid-height: count (x extents [mm])  |  by the slag's downflow: count at 1/4, "
+          "1/2, 3/4 of the height (centres at mid-height [mm])")
     for r in rows:
+        extents = ", ".join(f"{1e3 * a:.0f}-{1e3 * b:.0f}" for a, b in r["extents"])
         centres = ", ".join(f"{1e3 * c:.0f}" for c in r["centres_50"])
-        print(f"{r['time']:8.2f}  {r['n_25']:3d} {r['n_50']:3d} {r['n_75']:3d}   {centres}")
+        print(f"{r['time']:8.2f}  {r['droplet_channels']:3d} ({extents})  |  {r['n_25']} {r['n_50']} {r['n_75']} "
+              f"({centres})")
     return 0
 
 

@@ -167,9 +167,11 @@ def report(root="data/reference") -> str:
     for name, s in summaries.items():
         steady = f"{s['start']:.0f} ({s['cycles']}, {100 * s['spread']:.1f} %)" if s["steady"] else \
             f"not steady (last third from {s['start']:.0f})"
+        # a slot's run has a row of channels: one plume's radius and axis velocity mean nothing there
+        plume = "- | -" if runs[name].case.inlet_is_slot else \
+            f"{1e3 * s['channel_radius']:.1f} | {1e3 * s['channel_velocity']:.1f}"
         lines.append(f"{name} | {steady} | {s['droplet_count']:.0f} | {1e3 * s['mean_diameter']:.3f} | "
-                     f"{1e3 * s['sauter_diameter']:.3f} | {1e3 * s['channel_radius']:.1f} | "
-                     f"{1e3 * s['channel_velocity']:.1f} | {s['settled_fraction']:.3f} | {s['end_time']:g}")
+                     f"{1e3 * s['sauter_diameter']:.3f} | {plume} | {s['settled_fraction']:.3f} | {s['end_time']:g}")
     for first, second in (("simple", "simple_seed2"), ("cubic", "cubic_seed2")):
         if first in runs and second in runs:
             window, scatter = pair_scatter(runs[first].timeseries, runs[second].timeseries)
@@ -194,6 +196,13 @@ def report(root="data/reference") -> str:
             lines.append(f"{name} collision efficiency E = {e['efficiency']:.3f} +- {e['standard_error']:.3f} "
                          f"({e['merges']} merges against {e['expected_collisions']:.0f} gravitational collisions over "
                          f"{e['snapshots']} snapshots; quadrature error {e['quadrature_error']:.3f})")
+    for name in (n for n, run in runs.items() if run.case.inlet_is_slot):
+        from .channels import run_counts
+
+        for r in run_counts(root / name):
+            centres = ", ".join(f"{1e3 * c:.0f}" for c in r["centres_50"])
+            lines.append(f"{name} channels at t = {r['time']:g} s (central x-z plane): {r['n_25']} / {r['n_50']} / "
+                         f"{r['n_75']} at 1/4, 1/2, 3/4 of the height; at mid-height centred at x = {centres} mm")
     for coarse, fine in RESOLUTION_PAIRS:
         if coarse in runs and fine in runs:
             end = min(summaries[fine]["end_time"], summaries[coarse]["end_time"])

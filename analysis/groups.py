@@ -110,7 +110,8 @@ def design_table(path) -> str:
     for run in load_run_set(path).runs:
         groups = design_groups(run.case)
         changes = ", ".join(f"{k}={v}" for k, v in run.overrides.items()) or "-"
-        cells = [format(groups[key] * (1e3 if key == "plume_velocity" else 1.0), spec) for _, key, spec in columns]
+        cells = ["-" if math.isnan(groups[key]) else format(groups[key] * (1e3 if key == "plume_velocity" else 1.0),
+                                                            spec) for _, key, spec in columns]
         lines.append(f"| {run.name} | {run.family} | {run.case.case.name}: {changes} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -71,3 +71,18 @@ def test_identity_tells_the_same_run_from_another(tmp_path):
     assert differences(tmp_path / "a", tmp_path / "b") == []  # the clock and the metadata may differ
     assert differences(tmp_path / "a", tmp_path / "c") == ["checkpoint.npz: w differs"]
     assert main([str(tmp_path / "a"), str(tmp_path / "c")]) == 1 and main([str(tmp_path / "a")]) == 2
+
+
+def test_droplets_in_two_clouds_are_two_channels_and_a_curtain_is_one():
+    from analysis.channels import droplet_runs
+
+    rng = np.random.default_rng(5)
+    two = np.concatenate([rng.uniform(0.05, 0.10, 4000), rng.uniform(0.25, 0.32, 4000)])
+    runs = droplet_runs(two, np.ones(two.size), 0.0, 0.4, 5e-3)
+    assert len(runs) == 2
+    assert runs[0] == pytest.approx((0.05, 0.10), abs=5e-3) and runs[1] == pytest.approx((0.25, 0.32), abs=5e-3)
+    curtain = rng.uniform(0.075, 0.325, 20000)
+    wall = np.full(300, 0.012)  # a bin of droplets against an end wall: 1.5 % of the band's volume, not a channel
+    runs = droplet_runs(np.concatenate([curtain, wall]), np.ones(20300), 0.0, 0.4, 5e-3)
+    assert runs == [pytest.approx((0.075, 0.325), abs=5e-3)]
+    assert droplet_runs(np.zeros(0), np.zeros(0), 0.0, 0.4, 5e-3) == []

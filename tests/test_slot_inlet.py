@@ -68,7 +68,7 @@ def test_candidates_lie_uniformly_inside_the_slot():
 
 def test_the_engine_feeds_a_slot_and_conserves_matte(tmp_path):
     setup = fulldem.setup("demo", {**SLAB, "feed.mass_rate": 1e-3, "fulldem.cell_size": 0.005,
-                                   "fulldem.output_interval": 0.01, "fulldem.snapshot_interval": 0.0,
+                                   "fulldem.output_interval": 0.01, "fulldem.snapshot_interval": 0.02,
                                    "fulldem.fluid_step": 0.002})
     result = fulldem.run(setup, out=tmp_path, end_time=0.04, progress=False, log=quiet)
     ts = result.timeseries
@@ -82,6 +82,15 @@ def test_the_engine_feeds_a_slot_and_conserves_matte(tmp_path):
     assert (np.abs(y - 0.015) <= 0.01 - 0.5 * d + 1e-12).all()
     # a slot's length spread: the fed droplets cover it, not only a disk of its width around the centre
     assert np.ptp(x) > 0.06
+    # the slab tools read the run's slag snapshots: a count per snapshot at three heights, and the figure
+    from analysis.channels import draw, run_counts
+
+    rows = run_counts(tmp_path)
+    assert [r["time"] for r in rows] == pytest.approx([0.0, 0.02, 0.04])
+    assert all(set(r) == {"time", "n_25", "n_50", "n_75", "centres_50", "droplet_channels", "extents"} for r in rows)
+    assert rows[0]["n_50"] == 0 and rows[0]["droplet_channels"] == 0  # slag at rest, no droplet: no channel
+    draw(tmp_path, tmp_path / "channels.png")
+    assert (tmp_path / "channels.png").stat().st_size > 10_000
 
 
 def test_popbal_refuses_a_slot():
