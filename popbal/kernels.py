@@ -53,6 +53,8 @@ QUANTITIES = 3
 #: Cells, and sections within a cell, holding a matte volume fraction below this take no part in coalescence
 #: (rates ~ phi^2 are nil there) nor in the Courant limit of the time step [-].
 NEGLIGIBLE_VOLUME_FRACTION = 1e-14
+#: Most sweeps of busy_discount's averaged substitution (each at least halves the error; 60 reach round-off).
+MAX_BUSY_SWEEPS = 60
 
 #: Largest composition age [time constants] a section may be given; the reaction fit is flat there (e^-50).
 AGE_CAP_TIME_CONSTANTS = 50.0
@@ -424,27 +426,39 @@ def growth_time(diameter_a, diameter_b, growth_target, growth_rate):
 
 
 @njit(cache=True)
-def busy_discount(number, diameters, growth_target, growth_rate, beta, pair_j, pair_k, pairs, pair_beta, load):
+def busy_discount(number, diameters, growth_target, growth_rate, beta, pair_j, pair_k, pairs, pair_beta, free,
+                  update):
     """Discount a cell's kernel for partners that are busy: one merge at a time, each taking the pair's growth time.
 
-    In the full engine a marked pair merges only after its growth time t_jk (:func:`growth_time`) and neither
-    partner can be marked again before, so a droplet of section j is free a share f_j = 1 / (1 + L_j) of the time,
-    L_j = sum_k beta_jk N_k t_jk its merges per second times their duration (a handling time, as in Holling's type-II
-    response; frozen over the step). Each listed pair's kernel becomes beta_jk f_j f_k, in ``pair_beta`` and in
-    ``beta`` (K, K) alike. number (K,) [1/m^3], diameters (K,) [m]; load (K,) is work space. A collector falling
-    through a dense cloud meets partners far faster than it can merge with them, which a mean-field kernel would
-    otherwise let it do at once.
+    In the full engine a marked pair merges only after its growth time t_jk (:func:`growth_time`), neither partner
+    can be marked again before, and only pairs of two free droplets are marked. A droplet of section j is therefore
+    free a share f_j of the time with f_j = 1 / (1 + sum_k beta_jk N_k f_k t_jk): its merges per second with free
+    partners times their duration (a handling time, as in Holling's type-II response; frozen over the step). The
+    shares are solved by averaged substitution, f <- (f + 1 / (1 + L(f))) / 2, which contracts at least twofold per
+    sweep (to 1e-12, at most MAX_BUSY_SWEEPS), and each listed pair's kernel becomes beta_jk f_j f_k, in
+    ``pair_beta`` and in ``beta`` (K, K) alike. For one size in a dense cloud a droplet then merges (1 - f) / t
+    times a second, at most once per growth time, as in the engine. number (K,) [1/m^3], diameters (K,) [m]; free
+    and update (K,) are work space (free ends holding the shares).
     """
-    load[:] = 0.0
+    free[:] = 1.0
+    for _ in range(MAX_BUSY_SWEEPS):
+        update[:] = 0.0
+        for p in range(pairs):
+            j, k = pair_j[p], pair_k[p]
+            t = growth_time(diameters[j], diameters[k], growth_target, growth_rate)
+            update[j] += pair_beta[p] * number[k] * free[k] * t
+            if k != j:
+                update[k] += pair_beta[p] * number[j] * free[j] * t
+        change = 0.0
+        for j in range(free.size):
+            new = 0.5 * (free[j] + 1.0 / (1.0 + update[j]))
+            change = max(change, abs(new - free[j]))
+            free[j] = new
+        if change <= 1e-12:
+            break
     for p in range(pairs):
         j, k = pair_j[p], pair_k[p]
-        t = growth_time(diameters[j], diameters[k], growth_target, growth_rate)
-        load[j] += pair_beta[p] * number[k] * t
-        if k != j:
-            load[k] += pair_beta[p] * number[j] * t
-    for p in range(pairs):
-        j, k = pair_j[p], pair_k[p]
-        b = pair_beta[p] / ((1.0 + load[j]) * (1.0 + load[k]))
+        b = pair_beta[p] * free[j] * free[k]
         pair_beta[p] = b
         beta[j, k] = b
         beta[k, j] = b
@@ -453,8 +467,8 @@ def busy_discount(number, diameters, growth_target, growth_rate, beta, pair_j, p
 @njit(cache=True)
 def coalesce_zone(content, diameters, velocities, densities, volume_fraction, shear_rate, pivots, target,
                   loss_weight, dt, density_slag, interfacial_tension, psi, virtual_mass, form, threshold, rule,
-                  efficiency, speed_limit, max_rate_step, beta, births, k1, k2, trial, busy=False,
-                  growth_target=0.95, growth_rate=2.0):
+                  efficiency, speed_limit, max_rate_step, beta, births, k1, k2, trial, busy, growth_target,
+                  growth_rate):
     """Coalescence in every occupied cell of one zone over dt [s]; returns the largest number of sub-steps.
 
     content (J, Q, K) in place; diameters, velocities, densities (J, K) and volume_fraction (J,) from
@@ -462,12 +476,12 @@ def coalesce_zone(content, diameters, velocities, densities, volume_fraction, sh
     loss_weight from the grid. Cells below NEGLIGIBLE_VOLUME_FRACTION are skipped (the far tails the upwind scheme
     spreads ahead of a front, whose coalescence rate ~ phi^2 is nil). beta (K, K), births (Q + 1, K), k1, k2,
     trial (Q, K) are work space; the section and pair lists (K and K (K + 1) / 2 entries) are allocated once per
-    call, outside the cell loop. ``busy``: discount the kernel for partners busy merging (:func:`busy_discount`,
-    with the full engine's coalescence.growth_target [-] and growth_rate [1/s]).
+    call, outside the cell loop. ``busy`` (bool): discount the kernel for partners busy merging
+    (:func:`busy_discount`, with the case's coalescence.growth_target [-] and growth_rate [1/s]; ignored when off).
     """
     n_k = pivots.size
     size = n_k * (n_k + 1) // 2
-    load = np.empty(n_k)
+    free, update = np.empty(n_k), np.empty(n_k)
     sections = np.empty(n_k, np.int64)
     pair_j, pair_k, pair_target = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64)
     pair_beta = np.empty(size)
@@ -481,7 +495,7 @@ def coalesce_zone(content, diameters, velocities, densities, volume_fraction, sh
                                 efficiency, speed_limit, target, beta, pair_j, pair_k, pair_target, pair_beta)
         if busy:
             busy_discount(content[j, NUMBER], diameters[j], growth_target, growth_rate, beta, pair_j, pair_k, pairs,
-                          pair_beta, load)
+                          pair_beta, free, update)
         steps = coalesce_cell(content[j], pivots, sections, count, target, loss_weight, beta, pair_j, pair_k,
                               pair_target, pair_beta, pairs, dt, max_rate_step, births, k1, k2, trial)
         most = max(most, steps)

@@ -180,6 +180,12 @@ def test_layer_records_the_levels_without_machine_paths_and_bands_read_its_covar
     se = [fit.standard_errors[k] for k in keys[1:]]
     assert covariance[1, 2] == pytest.approx(fit.correlation[0, 1] * se[0] * se[1], rel=1e-3)
     assert covariance[0, 1] == 0.0 and delta == fit.discrepancy
+    assert "busy_partners" not in layer["popbal"]
+    # the 'busy' closure set writes its switch into the layer, so case.calibration=NAME applies what was fitted
+    busy = _hierarchy(fit)
+    busy.closures = "busy"
+    layer = tomllib.loads(write_layer(busy, tmp_path / "busy.toml", registry, "settler calibrate --set x").read_text())
+    assert layer["popbal"]["busy_partners"] is True and layer["provenance"]["closures"] == "busy"
 
 
 def test_holdouts_scored_without_bands_are_summarised_and_written(tmp_path, monkeypatch):

@@ -173,7 +173,7 @@ def test_coalesce_zone_matches_a_numpy_heun_integration_and_conserves(grid):
         [np.zeros((QUANTITIES, grid.size)) for _ in range(3)]
     steps = coalesce_zone(content, diameters, velocities, densities, volume_fraction, shear, grid.pivots, grid.target,
                           grid.loss_weight, dt, SLAG, SIGMA, PSI, VIRTUAL, FORM_SEED, THRESHOLD, RULE_PROBABILITY,
-                          EFFICIENCY, np.empty((0, 0)), max_rate_step, *work)
+                          EFFICIENCY, np.empty((0, 0)), max_rate_step, *work, False, 0.95, 2.0)
     assert most > 1 and steps == most  # sub-stepped, and the same sub-steps as the NumPy scheme
     expected = np.stack(expected)
     assert np.allclose(content, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
