@@ -4,8 +4,8 @@
 Two measures, because a slab's downflow need not be a row of columns. **By the droplets**: at mid-height (the band
 of :data:`settler.output.MID_BAND` of the height) the droplet volume is binned along x in cells of the grid, and a
 channel is a maximal run of bins holding at least :data:`DROPLET_SHARE` of the fullest bin's volume
-(:func:`droplet_runs`): one run is one curtain, however long. **By the slag**: at a height z the slag velocity w(x) (averaged over the slab's thickness y, or on its central x-z plane where only
-that is stored) is split into maximal runs of downflow (w < 0) between rising return flow; a **channel** is a run
+(:func:`droplet_runs`): one run is one curtain, however long. **By the slag**: at a height z the slag velocity
+w(x) (averaged over the slab's thickness y, or on its central x-z plane where only that is stored) is split into maximal runs of downflow (w < 0) between rising return flow; a **channel** is a run
 that carries at least :data:`MIN_SHARE` of the total downflow integral of max(-w, 0) dx at that height, so that a
 one-cell flicker of the return flow is not counted. The count at mid-height is the slab's channel count, the measure
 of the channel radius and axis velocity of a single plume (:mod:`settler.output`) having no meaning there; the
@@ -229,16 +229,19 @@ def main(argv=None) -> int:
     parser.add_argument("run", help="a run folder or a stored reference")
     parser.add_argument("--figure", default=None, metavar="PATH", help="draw the channels against time (a run folder)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    argv = [args.run]
+    if args.figure and (Path(args.run) / "reference.json").is_file():
+        print(f"analysis.channels: --figure draws a run folder's snapshots over time; {args.run} is a stored "
+              "reference, which keeps one or two (give the run folder it was stored from)", file=sys.stderr)
+        return 2
     try:
-        rows = run_counts(argv[0])
-        if args.figure:
-            draw(argv[0], args.figure)
+        rows = run_counts(args.run)
+        if rows and args.figure:
+            draw(args.run, args.figure)
     except (OSError, ValueError, LookupError) as exc:
         print(f"analysis.channels: {exc}", file=sys.stderr)
         return 2
     if not rows:
-        print(f"analysis.channels: {argv[0]} holds no slag snapshot", file=sys.stderr)
+        print(f"analysis.channels: {args.run} holds no slag snapshot", file=sys.stderr)
         return 2
     print("time [s]  by the droplets at mid-height: count (x extents [mm])  |  by the slag's downflow: count at 1/4, "
           "1/2, 3/4 of the height (centres at mid-height [mm])")

@@ -1,7 +1,9 @@
 """Whether two full-engine run folders hold the same run bit for bit: every array of their final ``checkpoint.npz``
-(droplets, slag velocity and pressure, feed state; not its metadata) and every value of their CSV outputs except
-the wall-clock columns. This is how an engine change that must not change results is checked, for example the
-slot inlet added to the reference set's engine (data/reference/README.md, "one engine").
+(droplets, slag velocity and pressure, feed state), every entry of its metadata (time, step count, counters, the
+random generators' states, the resolved case; not its wall-clock time) and every value of their CSV outputs except
+the wall-clock columns; a CSV output present in one folder only is a difference. This is how an engine change that
+must not change results is checked, for example the slot inlet added to the reference set's engine
+(data/reference/README.md, "one engine").
 
     python -m analysis.identity RUN_A RUN_B      # exit 0: identical; 1: what differs, one line each
 """
@@ -9,6 +11,7 @@ slot inlet added to the reference set's engine (data/reference/README.md, "one e
 from __future__ import annotations
 
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -33,9 +36,16 @@ def differences(a, b) -> list[str]:
                 out.append(f"checkpoint.npz: {name} only in {'b' if name in cb.files else 'a'}")
             elif not np.array_equal(ca[name], cb[name]):
                 out.append(f"checkpoint.npz: {name} differs")
+        meta_a, meta_b = (_meta(c) for c in (ca, cb))
+        for key in sorted(set(meta_a) | set(meta_b)):
+            if key not in CLOCK_COLUMNS and meta_a.get(key) != meta_b.get(key):
+                out.append(f"checkpoint.npz: metadata {key} differs")
     compared = 0
     for file in CSV_FILES:
-        if not ((a / file).exists() and (b / file).exists()):
+        if (a / file).exists() != (b / file).exists():
+            out.append(f"{file}: only in {'a' if (a / file).exists() else 'b'}")
+            continue
+        if not (a / file).exists():
             continue
         compared += 1
         ta, tb = pd.read_csv(a / file, comment="#"), pd.read_csv(b / file, comment="#")
@@ -50,6 +60,15 @@ def differences(a, b) -> list[str]:
     return out
 
 
+def _meta(checkpoint) -> dict:
+    """The JSON metadata of an open checkpoint (empty without one)."""
+    import json
+
+    if "__meta__" not in checkpoint.files:
+        return {}
+    return json.loads(bytes(checkpoint["__meta__"]).decode())
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 2:
@@ -57,13 +76,14 @@ def main(argv=None) -> int:
         return 2
     try:
         found = differences(*argv)
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
         print(f"analysis.identity: {exc}", file=sys.stderr)
         return 2
     for line in found:
         print(line)
     if not found:
-        print(f"{argv[0]} and {argv[1]}: the same run bit for bit (checkpoint arrays and CSV values, clock excepted)")
+        print(f"{argv[0]} and {argv[1]}: the same run bit for bit (checkpoint arrays and metadata, CSV values; "
+              "clock excepted)")
     return 1 if found else 0
 
 

@@ -155,8 +155,9 @@ class Boundaries(NamedTuple):
 def boundaries_for(case, lower, upper, periodic, *, slag_inlet=True, outlet=True,
                    absorbing_bottom=True) -> Boundaries:
     """The boundaries of a case's box [lower, upper]: the inlet disk of geometry.inlet_diameter (a slot
-    geometry.inlet_length by inlet_diameter where the length is given) at the case's inlet centre on the top face, with the slag feed (slag.feed_rate) flowing in if ``slag_inlet``; the outlet disk of
-    geometry.outlet_diameter centred across its wall at geometry.outlet_height if ``outlet``."""
+    geometry.inlet_length by inlet_diameter where the length is given) at the case's inlet centre on the top face,
+    with the slag feed (slag.feed_rate) flowing in if ``slag_inlet``; the outlet disk of geometry.outlet_diameter
+    centred across its wall at geometry.outlet_height if ``outlet``."""
     g = case.geometry
     lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
     the_inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, float(upper[2]),

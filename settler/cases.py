@@ -89,8 +89,9 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "inlet_center": Field(L, "m", "(x, y) of the inlet centre on the top surface; default the middle.",
                               length=2, optional=True),
         "inlet_length": Field(F, "m", "Length along x of a slot inlet: with it the feed enters over a rectangle "
-                              "inlet_length (x) by inlet_diameter (y) centred at inlet_center, matte only (slag.feed_rate "
-                              "= 0); absent: a disk of inlet_diameter.", 0.0, exclusive_minimum=True, optional=True),
+                              "inlet_length (x) by inlet_diameter (y) centred at inlet_center, matte only "
+                              "(slag.feed_rate = 0); absent: a disk of inlet_diameter.", 0.0, exclusive_minimum=True,
+                              optional=True),
         "outlet_diameter": Field(F, "m", "Diameter of the side pressure outlet; 0 for none (closed box).", 0.0),
         "outlet_height": Field(F, "m", "Height of the outlet centre above the bottom.", 0.0),
         "outlet_side": Field(S, "", "Wall holding the outlet.", choices=("x-", "x+", "y-", "y+")),
@@ -657,7 +658,13 @@ def _check_consistency(case: Case):
     if g.inlet_length is not None:
         half = 0.5 * g.inlet_length
         if not (half <= cx <= g.width - half and r_in <= cy <= g.depth - r_in):
-            _fail("geometry.inlet_length", g.inlet_length,
+            if g.inlet_length > g.width or (g.inlet_center is None and g.inlet_diameter <= g.depth):
+                key, value = "geometry.inlet_length", g.inlet_length
+            elif g.inlet_diameter > g.depth:
+                key, value = "geometry.inlet_diameter", g.inlet_diameter
+            else:
+                key, value = "geometry.inlet_center", list(g.inlet_center)
+            _fail(key, value,
                   f"the slot inlet ({g.inlet_length:g} x {g.inlet_diameter:g} m centred at ({cx:g}, {cy:g}) m) must "
                   f"lie inside the top face {g.width:g} x {g.depth:g} m")
         if case.slag.feed_rate > 0.0:

@@ -57,7 +57,11 @@ def _fake_run(folder, value):
     import pandas as pd
 
     folder.mkdir()
-    np.savez(folder / "checkpoint.npz", __meta__=np.array(str(value)), u=np.full(4, 1.0), w=np.full(4, value))
+    import json
+
+    meta = json.dumps({"time": 1.0, "steps": 10, "wall_time": 3.0 + value}).encode()  # the engine's form: JSON bytes
+    np.savez(folder / "checkpoint.npz", __meta__=np.frombuffer(meta, np.uint8), u=np.full(4, 1.0),
+             w=np.full(4, value))
     pd.DataFrame({"time": [0.0, 1.0], "droplet_count": [0, 10], "wall_time": [0.0, 2.0 + value]}).to_csv(
         folder / "timeseries.csv", index=False)
 
@@ -70,6 +74,10 @@ def test_identity_tells_the_same_run_from_another(tmp_path):
     _fake_run(tmp_path / "c", 0.25)
     assert differences(tmp_path / "a", tmp_path / "b") == []  # the clock and the metadata may differ
     assert differences(tmp_path / "a", tmp_path / "c") == ["checkpoint.npz: w differs"]
+    (tmp_path / "b" / "zones.csv").write_text("time\n0.0\n")
+    assert differences(tmp_path / "a", tmp_path / "b") == ["zones.csv: only in b"]
+    (tmp_path / "b" / "checkpoint.npz").write_bytes(b"not a zip")
+    assert main([str(tmp_path / "a"), str(tmp_path / "b")]) == 2
     assert main([str(tmp_path / "a"), str(tmp_path / "c")]) == 1 and main([str(tmp_path / "a")]) == 2
 
 

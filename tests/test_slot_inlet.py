@@ -33,8 +33,8 @@ def test_a_slot_is_a_rectangle_of_length_by_width():
 
 @pytest.mark.parametrize("overrides, key", [
     ({"geometry.inlet_length": 0.11}, "geometry.inlet_length = 0.11"),
-    ({"geometry.inlet_diameter": 0.032}, "geometry.inlet_length = 0.08"),
-    ({"geometry.inlet_center": [0.02, 0.01]}, "geometry.inlet_length = 0.08"),
+    ({"geometry.inlet_diameter": 0.032}, "geometry.inlet_diameter = 0.032"),
+    ({"geometry.inlet_center": [0.02, 0.01]}, r"geometry.inlet_center = \[0.02, 0.01\]"),
 ])
 def test_a_slot_off_the_top_face_is_refused(overrides, key):
     with pytest.raises(CaseError, match=key):
