@@ -42,8 +42,8 @@ from numba import njit
 # The coalescence rules (registry, codes, and merger_efficiency, which applies a rule to seed Eq. 2) are shared with
 # the CFD-DEM engine, so they live in settler.physics; imported here under their old names.
 from settler.physics import (COALESCENCE_RULES, RULE_PROBABILITY, RULE_STEP, coalescence_probability,  # noqa: F401
-                             composition_from_masses, density_at_age, merger_efficiency, reacted_mass, reaction_age,
-                             relative_diameter_at_age, richardson_zaki_factor, species_masses)
+                             composition_from_masses, density_at_age, growth_time, merger_efficiency, reacted_mass,
+                             reaction_age, relative_diameter_at_age, richardson_zaki_factor, species_masses)
 
 from .closures import cloud_velocity
 
@@ -417,20 +417,12 @@ def collision_pairs(sections, count, diameters, velocities, densities, shear_rat
 
 
 @njit(cache=True)
-def growth_time(diameter_a, diameter_b, growth_target, growth_rate):
-    """The full engine's growth time [s] of a marked pair (fulldem.submodels.coalescence): the smaller partner's
-    contact diameter grows by growth_rate d_m per second [1/s] until growth_target d_m, d_m the merged diameter."""
-    merged = (diameter_a**3 + diameter_b**3) ** (1.0 / 3.0)
-    small = min(diameter_a, diameter_b)
-    return max(growth_target * merged - small, 0.0) / (growth_rate * merged)
-
-
-@njit(cache=True)
 def busy_discount(number, diameters, growth_target, growth_rate, beta, pair_j, pair_k, pairs, pair_beta, free,
-                  update):
+                  update, pair_load):
     """Discount a cell's kernel for partners that are busy: one merge at a time, each taking the pair's growth time.
 
-    In the full engine a marked pair merges only after its growth time t_jk (:func:`growth_time`), neither partner
+    In the full engine a marked pair merges only after its growth time t_jk (settler.physics.growth_time, the
+    engine's own law), neither partner
     can be marked again before, and only pairs of two free droplets are marked. A droplet of section j is therefore
     free a share f_j of the time with f_j = 1 / (1 + sum_k beta_jk N_k f_k t_jk): its merges per second with free
     partners times their duration (a handling time, as in Holling's type-II response; frozen over the step). The
@@ -438,17 +430,19 @@ def busy_discount(number, diameters, growth_target, growth_rate, beta, pair_j, p
     sweep (to 1e-12, at most MAX_BUSY_SWEEPS), and each listed pair's kernel becomes beta_jk f_j f_k, in
     ``pair_beta`` and in ``beta`` (K, K) alike. For one size in a dense cloud a droplet then merges (1 - f) / t
     times a second, at most once per growth time, as in the engine. number (K,) [1/m^3], diameters (K,) [m]; free
-    and update (K,) are work space (free ends holding the shares).
+    and update (K,) and pair_load (P,) are work space (free ends holding the shares).
     """
+    for p in range(pairs):  # beta_jk t_jk, once per pair rather than once per sweep
+        pair_load[p] = pair_beta[p] * growth_time(diameters[pair_j[p]], diameters[pair_k[p]], growth_target,
+                                                  growth_rate)
     free[:] = 1.0
     for _ in range(MAX_BUSY_SWEEPS):
         update[:] = 0.0
         for p in range(pairs):
             j, k = pair_j[p], pair_k[p]
-            t = growth_time(diameters[j], diameters[k], growth_target, growth_rate)
-            update[j] += pair_beta[p] * number[k] * free[k] * t
+            update[j] += pair_load[p] * number[k] * free[k]
             if k != j:
-                update[k] += pair_beta[p] * number[j] * free[j] * t
+                update[k] += pair_load[p] * number[j] * free[j]
         change = 0.0
         for j in range(free.size):
             new = 0.5 * (free[j] + 1.0 / (1.0 + update[j]))
@@ -484,7 +478,7 @@ def coalesce_zone(content, diameters, velocities, densities, volume_fraction, sh
     free, update = np.empty(n_k), np.empty(n_k)
     sections = np.empty(n_k, np.int64)
     pair_j, pair_k, pair_target = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64)
-    pair_beta = np.empty(size)
+    pair_beta, pair_load = np.empty(size), np.empty(size)
     most = 0
     for j in range(content.shape[0]):
         if volume_fraction[j] < NEGLIGIBLE_VOLUME_FRACTION:
@@ -495,7 +489,7 @@ def coalesce_zone(content, diameters, velocities, densities, volume_fraction, sh
                                 efficiency, speed_limit, target, beta, pair_j, pair_k, pair_target, pair_beta)
         if busy:
             busy_discount(content[j, NUMBER], diameters[j], growth_target, growth_rate, beta, pair_j, pair_k, pairs,
-                          pair_beta, free, update)
+                          pair_beta, free, update, pair_load)
         steps = coalesce_cell(content[j], pivots, sections, count, target, loss_weight, beta, pair_j, pair_k,
                               pair_target, pair_beta, pairs, dt, max_rate_step, births, k1, k2, trial)
         most = max(most, steps)

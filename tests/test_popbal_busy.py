@@ -10,7 +10,8 @@ tends to 1 / t; no load, no change; and a popbal run with the option on merges l
 import numpy as np
 import pytest
 
-from popbal.kernels import busy_discount, growth_time
+from popbal.kernels import busy_discount
+from settler.physics import growth_time
 
 TARGET, RATE = 0.95, 2.0  # coalescence.growth_target [-] and growth_rate [1/s] of data/properties/flash_smelting.toml
 
@@ -36,7 +37,7 @@ def _discount(number, diameters, pairs):
     pair_beta = np.array([pairs[key] for key in keys])
     free = np.empty(n)
     busy_discount(np.asarray(number, float), np.asarray(diameters, float), TARGET, RATE, beta, pair_j, pair_k,
-                  len(keys), pair_beta, free, np.empty(n))
+                  len(keys), pair_beta, free, np.empty(n), np.empty(len(keys)))
     return dict(zip(keys, pair_beta)), beta, free
 
 

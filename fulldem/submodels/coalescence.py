@@ -78,7 +78,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from settler.physics import RULE_STEP, coalescence_probability, collision_merges, merged_diameter_v
+from settler.physics import RULE_STEP, coalescence_probability, collision_merges, growth_time_v, merged_diameter_v
 from settler.physics.coalescence import PROBABILITY_FORMS
 
 from ..droplets import COALESCING
@@ -153,9 +153,7 @@ class Coalescence(Submodel):
         first, second = marked_pairs(s)
         if first.size == 0:
             return {"pairs_waiting": 0, "longest_marked": 0.0}
-        merged = merged_diameter_v(s.diameter[first], s.diameter[second])
-        small = np.minimum(s.diameter[first], s.diameter[second])
-        growth_time = np.maximum(self.growth_target * merged - small, 0.0) / (self.growth_rate * merged)
+        growth_time = growth_time_v(s.diameter[first], s.diameter[second], self.growth_target, self.growth_rate)
         marked_for = sim.time - s.marked_time[first]
         return {"pairs_waiting": int((marked_for > growth_time + sim.dt).sum()),
                 "longest_marked": float(np.max(marked_for))}

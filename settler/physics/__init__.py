@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from .coalescence import (COALESCENCE_RULES, FORM_LUO, FORM_SEED, PROBABILITY_FORMS, RULE_PROBABILITY, RULE_STEP,
-                          coalescence_probability, collision_merges, merged_diameter, merger_efficiency,
+                          coalescence_probability, collision_merges, growth_time, merged_diameter, merger_efficiency,
                           merger_fraction, weber_number)
 from .constants import GAS_CONSTANT, MOLAR_MASS_CU, MOLAR_MASS_CU2S, MOLAR_MASS_FES, STANDARD_GRAVITY
 from .feed import (FeedSchedule, droplet_rate, mean_droplet_mass, sample_scale_factors, scale_factor_moment,
@@ -70,6 +70,7 @@ square_duct_factor_v = vectorize(square_duct_factor)
 richardson_zaki_factor_v = vectorize(richardson_zaki_factor)
 coalescence_probability_v = vectorize(coalescence_probability)
 merged_diameter_v = vectorize(merged_diameter)
+growth_time_v = vectorize(growth_time)
 weber_number_v = vectorize(weber_number)
 matte_density_v = vectorize(matte_density)
 reaction_fraction_v = vectorize(reaction_fraction)

@@ -123,3 +123,12 @@ def merger_efficiency(diameter_a, diameter_b, approach_speed, density_droplet, d
 def merged_diameter(diameter_a, diameter_b):
     """Diameter of the droplet formed from two, conserving volume: (d_a^3 + d_b^3)^(1/3) [m]."""
     return (diameter_a**3 + diameter_b**3) ** (1.0 / 3.0)
+
+
+@njit(cache=True)
+def growth_time(diameter_a, diameter_b, growth_target, growth_rate):
+    """The growth time [s] of a marked pair in the delayed coalescence (fulldem.submodels.coalescence): the smaller
+    partner's contact diameter grows by growth_rate d_m per second [1/s] until growth_target d_m, d_m the merged
+    diameter; popbal's busy partners (popbal.kernels.busy_discount) take the same time."""
+    merged = merged_diameter(diameter_a, diameter_b)
+    return max(growth_target * merged - min(diameter_a, diameter_b), 0.0) / (growth_rate * merged)
