@@ -53,14 +53,33 @@ class OutletDisk(NamedTuple):
 
 
 class Inlet(NamedTuple):
-    """The feed disk on the top face: centre (x, y) [m], radius [m], top z [m]."""
+    """The feed area on the top face: centre (x, y) [m], radius [m], top z [m], and ``length`` [m]: 0 for a disk
+    of that radius, else a slot (rectangle) ``length`` long along x and 2 ``radius`` wide along y."""
 
     centre: tuple[float, float]
     radius: float
     top: float
+    length: float = 0.0
+
+    @property
+    def is_slot(self) -> bool:
+        return self.length > 0.0
+
+    @property
+    def half_extent(self) -> tuple[float, float]:
+        """Half the feed area's extent along x and y [m] (the disk's radius twice for a disk)."""
+        return (0.5 * self.length if self.is_slot else self.radius, self.radius)
+
+    @property
+    def area(self) -> float:
+        """The feed area [m^2]."""
+        return self.length * 2.0 * self.radius if self.is_slot else float(np.pi) * self.radius**2
 
     def contains(self, x, y):
-        """Whether points (x, y) [m] lie within the disk's radius of its axis."""
+        """Whether points (x, y) [m] lie within the disk's radius of its axis (a slot: inside its rectangle)."""
+        if self.is_slot:
+            return ((np.abs(np.asarray(x) - self.centre[0]) <= 0.5 * self.length)
+                    & (np.abs(np.asarray(y) - self.centre[1]) <= self.radius))
         return (np.asarray(x) - self.centre[0]) ** 2 + (np.asarray(y) - self.centre[1]) ** 2 <= self.radius**2
 
 
@@ -113,6 +132,9 @@ class Boundaries(NamedTuple):
     def fluid_inlet(self):
         """The fluid solver's velocity inlet (:class:`fulldem.boundaries.InletDisk`), or None without slag inflow."""
 
+        if self.slag_inlet and self.inlet.is_slot:
+            raise ValueError("a slot inlet feeds matte only: no slag inflow through it (settler.cases refuses "
+                             "slag.feed_rate > 0 with geometry.inlet_length)")
         return InletDisk(self.inlet.centre, self.inlet.radius) if self.slag_inlet else None
 
     def fluid_outlet(self):
@@ -132,12 +154,13 @@ class Boundaries(NamedTuple):
 
 def boundaries_for(case, lower, upper, periodic, *, slag_inlet=True, outlet=True,
                    absorbing_bottom=True) -> Boundaries:
-    """The boundaries of a case's box [lower, upper]: the inlet disk of geometry.inlet_diameter at the case's inlet
-    centre on the top face, with the slag feed (slag.feed_rate) flowing in if ``slag_inlet``; the outlet disk of
+    """The boundaries of a case's box [lower, upper]: the inlet disk of geometry.inlet_diameter (a slot
+    geometry.inlet_length by inlet_diameter where the length is given) at the case's inlet centre on the top face, with the slag feed (slag.feed_rate) flowing in if ``slag_inlet``; the outlet disk of
     geometry.outlet_diameter centred across its wall at geometry.outlet_height if ``outlet``."""
     g = case.geometry
     lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-    the_inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, float(upper[2]))
+    the_inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, float(upper[2]),
+                      float(g.inlet_length) if g.inlet_length is not None else 0.0)
     the_outlet = None
     if outlet:
         side = SIDES[g.outlet_side]

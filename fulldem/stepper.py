@@ -54,7 +54,7 @@ from .fluid.grid import Grid
 from .submodels.base import submodels_for
 from .submodels.coalescence import empty_size_table, size_bin
 from .submodels.exits import classify_exits
-from .submodels.feed import draw_inlet_candidates, place_without_overlap
+from .submodels.feed import draw_inlet_candidates, draw_slot_candidates, place_without_overlap
 from .tuning import SKIN_MIN, SORT_INTERVAL, PhaseTimes, skin_for
 
 
@@ -345,19 +345,24 @@ class Simulation:
 
     # ------------------------------------------------------------------------------------------------ feed & exits
     def insert(self, diameters):
-        """Insert droplets of the given diameters over the inlet disk without overlap; unplaced ones wait."""
+        """Insert droplets of the given diameters over the inlet (disk or slot) without overlap; unplaced ones wait."""
         diameters = np.concatenate([self.backlog, diameters])
         if diameters.size == 0:
             return 0
         fd, inlet = self.case.fulldem, self.bounds.inlet
         top, radius = inlet.top, inlet.radius
         cx, cy = inlet.centre
-        candidates = draw_inlet_candidates(self.rng, diameters, (cx, cy), radius, top, fd.insertion_layer,
-                                           fd.insertion_tries)
+        if inlet.is_slot:
+            candidates = draw_slot_candidates(self.rng, diameters, (cx, cy), inlet.half_extent, top,
+                                              fd.insertion_layer, fd.insertion_tries)
+        else:
+            candidates = draw_inlet_candidates(self.rng, diameters, (cx, cy), radius, top, fd.insertion_layer,
+                                               fd.insertion_tries)
         reach = max(float(diameters.max()), float(self.store.diameter[: self.store.count].max())
                     if self.store.count else 0.0)
-        lower = np.array([cx - radius, cy - radius, top - fd.insertion_layer - diameters.max()])
-        upper = np.array([cx + radius, cy + radius, top])
+        hx, hy = inlet.half_extent
+        lower = np.array([cx - hx, cy - hy, top - fd.insertion_layer - diameters.max()])
+        upper = np.array([cx + hx, cy + hy, top])
         chosen = np.empty(len(diameters), dtype=np.int64)
         place_without_overlap(candidates, diameters, self.store.position, self.store.diameter, self.store.count,
                               lower, upper, reach, chosen)

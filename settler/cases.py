@@ -85,6 +85,9 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                 exclusive_minimum=True),
         "inlet_center": Field(L, "m", "(x, y) of the inlet centre on the top surface; default the middle.",
                               length=2, optional=True),
+        "inlet_length": Field(F, "m", "Length along x of a slot inlet: with it the feed enters over a rectangle "
+                              "inlet_length (x) by inlet_diameter (y) centred at inlet_center, matte only (slag.feed_rate "
+                              "= 0); absent: a disk of inlet_diameter.", 0.0, exclusive_minimum=True, optional=True),
         "outlet_diameter": Field(F, "m", "Diameter of the side pressure outlet; 0 for none (closed box).", 0.0),
         "outlet_height": Field(F, "m", "Height of the outlet centre above the bottom.", 0.0),
         "outlet_side": Field(S, "", "Wall holding the outlet.", choices=("x-", "x+", "y-", "y+")),
@@ -306,6 +309,17 @@ class Case:
         if g.inlet_center is None:
             return (0.5 * g.width, 0.5 * g.depth)
         return tuple(g.inlet_center)
+
+    @property
+    def inlet_is_slot(self) -> bool:
+        """Whether the inlet is a slot (geometry.inlet_length given) rather than a disk."""
+        return self.geometry.inlet_length is not None
+
+    @property
+    def inlet_area(self) -> float:
+        """Area of the inlet on the top surface [m^2]: the disk's pi d^2 / 4, or the slot's length x width."""
+        g = self.geometry
+        return g.inlet_length * g.inlet_diameter if self.inlet_is_slot else math.pi * 0.25 * g.inlet_diameter**2
 
     @property
     def has_outlet(self) -> bool:
@@ -570,7 +584,16 @@ def _check_consistency(case: Case):
                         f"{s.reference_temperature:g} K); allowed: values that give a finite viscosity > 0")
     cx, cy = case.inlet_center
     r_in = 0.5 * g.inlet_diameter
-    if not (r_in <= cx <= g.width - r_in and r_in <= cy <= g.depth - r_in):
+    if g.inlet_length is not None:
+        half = 0.5 * g.inlet_length
+        if not (half <= cx <= g.width - half and r_in <= cy <= g.depth - r_in):
+            _fail("geometry.inlet_length", g.inlet_length,
+                  f"the slot inlet ({g.inlet_length:g} x {g.inlet_diameter:g} m centred at ({cx:g}, {cy:g}) m) must "
+                  f"lie inside the top face {g.width:g} x {g.depth:g} m")
+        if case.slag.feed_rate > 0.0:
+            _fail("slag.feed_rate", case.slag.feed_rate,
+                  "a slot inlet (geometry.inlet_length) feeds matte only: allowed 0, or a disk inlet (no inlet_length)")
+    elif not (r_in <= cx <= g.width - r_in and r_in <= cy <= g.depth - r_in):
         _fail("geometry.inlet_center" if g.inlet_center is not None else "geometry.inlet_diameter",
               list(g.inlet_center) if g.inlet_center is not None else g.inlet_diameter,
               f"the inlet disk (diameter {g.inlet_diameter:g} m centred at ({cx:g}, {cy:g}) m) must lie inside "

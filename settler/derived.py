@@ -148,7 +148,7 @@ def _derived_numbers(case: Case) -> dict[str, list[Quantity]]:
 
     # Dilute plume under the inlet: each size class k carries its volume flux Q_k at its own velocity v_k, so
     # phi = sum Q_k / (A v_k) = Q / (A v(d_mean)) * sum_k w_k (d_mean / d_k)^2 in the Stokes regime.
-    area = math.pi * 0.25 * g.inlet_diameter**2
+    area = case.inlet_area  # the disk's pi d^2 / 4, a slot's length x width
     v_mean = stokes_velocity(summary.mean_diameter, rho_p, s.density, mu)
     q = f.mass_rate / rho_p
     phi_dilute = q / (area * v_mean) * summary.slowness_factor
@@ -166,7 +166,7 @@ def _derived_numbers(case: Case) -> dict[str, list[Quantity]]:
         phi_hindered = math.nan
         note = (f"no steady hindered state: the feed exceeds the largest hindered flux {flux_peak:.3f}; "
                 "collective (plume) settling must carry it")
-    radius = 0.5 * g.inlet_diameter
+    radius = 0.5 * g.inlet_diameter  # a slot: half its width, the cloud's narrower half-extent
     groups["cluster under the inlet"] = [
         Quantity("volume fraction, dilute estimate", phi_dilute, "-", "Q / (A_inlet v_St) over the feed distribution"),
         Quantity("volume fraction, hindered (Richardson-Zaki)", phi_hindered, "-", note),

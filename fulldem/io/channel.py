@@ -7,6 +7,10 @@
   the grid's z-face velocities;
 * their profile against height (:data:`settler.output.CHANNEL_PROFILE`, :data:`settler.output.PROFILE_BANDS`
   bands), written at every snapshot to ``channel_profile.csv``.
+
+Under a slot inlet (``geometry.inlet_length``) these still measure about the slot's centre axis, which is where one
+channel of several may or may not be; a slab's channels are counted from its snapshots instead
+(:mod:`analysis.channels`).
 """
 
 from __future__ import annotations

@@ -123,8 +123,13 @@ def snapshot_tables(sim, eps_faces) -> dict[str, list[dict]]:
             "upward_slag_flux": float(flux[flux > 0.0].sum()), "downward_slag_flux": float(-flux[flux < 0.0].sum()),
             "return_radius": return_radius(w, x, y, (x0, y0), RING_CELLS * h),
             "rising_volume": float(volume[inside & (vz > 0.0)].sum())})
-    under = r <= inlet.radius
-    thickness, fraction, peak = roof_layer(height - z[under], volume[under], h, math.pi * inlet.radius**2, height)
+    if inlet.is_slot:  # the roof layer under a slot: the droplets above its rectangle
+        under = inlet.contains(position[:, 0], position[:, 1])
+        thickness, fraction, peak = roof_layer(height - z[under], volume[under], h, inlet.area, height)
+    else:
+        under = r <= inlet.radius
+        thickness, fraction, peak = roof_layer(height - z[under], volume[under], h, math.pi * inlet.radius**2,
+                                               height)
     below = z < height - sim.case.fulldem.insertion_layer
     rising = below & (vz > 0.0)
     zones = [{"time": sim.time, "roof_thickness": thickness, "roof_volume_fraction": fraction,

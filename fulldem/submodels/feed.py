@@ -92,3 +92,16 @@ def draw_inlet_candidates(rng, diameters, center, radius, top, layer, tries):
     out[..., 1] = center[1] + rho * np.sin(theta)
     out[..., 2] = z
     return out
+
+
+def draw_slot_candidates(rng, diameters, center, half_extent, top, layer, tries):
+    """Random candidate centres (m, tries, 3) over a rectangular inlet of half extents ``half_extent`` (x, y) [m]
+    around ``center``, each droplet fully inside the rectangle and below the top surface, in a layer of thickness
+    ``layer`` [m] under it."""
+    m = len(diameters)
+    out = np.empty((m, tries, 3))
+    for axis in (0, 1):
+        allowed = np.maximum(half_extent[axis] - 0.5 * diameters, 0.0)[:, None]
+        out[..., axis] = center[axis] + allowed * rng.uniform(-1.0, 1.0, size=(m, tries))
+    out[..., 2] = top - 0.5 * diameters[:, None] - rng.uniform(0.0, layer, size=(m, tries))
+    return out
