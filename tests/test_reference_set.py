@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +49,6 @@ def test_provenance_names_command_commit_seed_and_a_clean_tree(folder):
 
 
 def _engines() -> tuple[dict, list[dict]]:
-    import tomllib
 
     data = tomllib.loads((ROOT / "data" / "reference" / "engines.toml").read_text())
     return data["set"], data.get("equivalent", [])
@@ -83,3 +84,24 @@ def test_the_reference_set_stays_within_its_storage_budget():
     folder = ROOT / "data" / "reference"
     total = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
     assert total <= STORAGE_LIMIT, f"data/reference holds {total / 1e6:.2f} MB, over {STORAGE_LIMIT / 1e6:g} MB"
+
+
+def _git(*args):
+    return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
+
+
+def test_every_engine_commit_is_in_the_repository():
+    """Provenance that names a commit nobody can check out is no provenance: every stored run's commit and every
+    equivalent engine's commit is an object of this repository whose trees are the ones recorded (skipped where the
+    checkout carries no history, as a shallow clone)."""
+    if _git("rev-parse", "--is-shallow-repository").stdout.strip() != "false":
+        pytest.skip("no full git history in this checkout")
+    for folder in STORED:
+        info = _info(folder)
+        for part, tree in info["engine_trees"].items():
+            found = _git("rev-parse", f"{info['commit']}:{part}")
+            assert found.returncode == 0, f"{folder.name}: commit {info['commit']} is not in the repository"
+            assert found.stdout.strip() == tree, f"{folder.name}: {part} at {info['commit'][:7]} is not {tree[:7]}"
+    for e in tomllib.loads((ROOT / "data" / "reference" / "engines.toml").read_text())["equivalent"]:
+        for part in ("fulldem", "popbal", "settler"):
+            assert _git("rev-parse", f"{e['commit']}:{part}").stdout.strip() == e[part], e["commit"]
