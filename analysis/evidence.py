@@ -16,6 +16,9 @@ droplets, and the collision efficiency of the kernel run (SI units throughout).
   n_j V predicts, integrated over the snapshots in horizontal slices (so that the clouds' separation as they settle
   counts), with the measured mean settling velocity of each size; its standard error from the Poisson count of
   merges and the scatter of the velocity difference over the snapshots.
+* :func:`height_bands` -- where a run's droplets are: the count in the top band (the roof layer), the bottom band
+  (over the floor) and between, from a full run's snapshot or popbal's distribution alike, so that the two engines'
+  counts can be compared zone by zone rather than as one number.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ import numpy as np
 import pandas as pd
 
 from settler.output import half_volume_radius
+
+from .runs import REDUCED_ENGINE
 
 from .kernel_run import (EXPOSURE_FILE, collision_efficiency, kernel_exposure, kernel_run_efficiency,  # noqa: F401
                          pair_exposure, write_kernel_exposure)
@@ -106,6 +111,38 @@ def rim_share(droplets: pd.DataFrame, axis, z_low: float, z_high: float) -> dict
     count = int(outside.sum())
     return {"share": int(rim.sum()) / count if count else math.nan, "outside": count, "rim": int(rim.sum()),
             "half_volume_radius": r_half, "median_age": median}
+
+
+#: Thickness of the top and bottom bands of :func:`height_bands` [m]: two 5 mm cells of the designed set's grid.
+HEIGHT_BAND = 0.01
+
+
+def height_bands(run, time: float | None = None, band: float = HEIGHT_BAND) -> dict:
+    """Where the droplets of ``run`` (an :class:`analysis.Run`, full engine or popbal) are at the output nearest
+    ``time`` [s] (default: the last): {"time" [s], "top" (droplets within ``band`` [m] of the slag's top), "bottom"
+    (within ``band`` of the floor), "middle" (between), "total"}, counts [-]. A full run's are counted in its
+    snapshot; popbal's are its number density [1/m^3] times the zone's area [m^2] and the cell's height, the cells
+    counted by their centres. Refuses a band that leaves no middle."""
+    height = float(run.case.geometry.height)
+    if not (0.0 < band < height / 2.0):
+        raise ValueError(f"band = {band!r} m: must be > 0 and below half the height ({height / 2.0:g} m)")
+    if run.engine == REDUCED_ENGINE:
+        data = run.distribution()
+        times = data["time"].to_numpy()
+        k = len(times) - 1 if time is None else int(np.argmin(np.abs(times - time)))
+        z = data["z"].to_numpy()
+        dz = np.gradient(z) if len(z) > 1 else np.array([height])
+        density = data["number_density"].isel(time=k).to_numpy().sum(axis=-1)  # zone, z [1/m^3]
+        per_height = (density * data["zone_area"].to_numpy()[:, None]).sum(axis=0) * dz
+        at = float(times[k])
+    else:
+        at, droplets = run.droplets(run.snapshot_times()[-1] if time is None else time)
+        z = droplets["z"].to_numpy()
+        per_height = np.ones_like(z)
+    top = float(per_height[z >= height - band].sum())
+    bottom = float(per_height[z < band].sum())
+    total = float(per_height.sum())
+    return {"time": float(at), "top": top, "bottom": bottom, "middle": total - top - bottom, "total": total}
 
 
 #: Steady quantities of the paper table and the seed scatter: time-series columns.
@@ -216,9 +253,33 @@ def report(root="data/reference") -> str:
     return "\n".join(lines)
 
 
+def _print_height_bands(prog: str, folders, time, band) -> int:
+    import sys
+    from pathlib import Path
+
+    from settler.errors import OutputError
+
+    from .runs import load_run
+    print(f"{'run':28s} {'engine':8s} {'time [s]':>8s} {'top':>8s} {'middle':>8s} {'bottom':>8s} {'total':>8s}"
+          f"   (droplets; top and bottom bands {1e3 * band:g} mm)")
+    for folder in folders:
+        try:
+            run = load_run(folder)
+            times = [time] if time is not None or run.engine == REDUCED_ENGINE else run.snapshot_times()
+            rows = [height_bands(run, t, band) for t in times]
+        except (OutputError, ValueError) as exc:
+            print(f"{prog}: error: {exc}", file=sys.stderr)
+            return 2
+        for b in rows:
+            print(f"{Path(folder).name:28s} {run.engine or '?':8s} {b['time']:8.3g} {b['top']:8.0f} {b['middle']:8.0f} "
+                  f"{b['bottom']:8.0f} {b['total']:8.0f}")
+    return 0
+
+
 def main(argv=None) -> int:
-    """``python -m analysis.evidence [ROOT]``: print :func:`report`. Exit status 0, 2 for a ROOT that holds no
-    stored reference run."""
+    """``python -m analysis.evidence [ROOT]``: print :func:`report`; ``--height-bands RUN ...``: print
+    :func:`height_bands` of each run instead. Exit status 0, 2 for a ROOT that holds no stored reference run or a RUN
+    that cannot be read."""
     import argparse
     import sys
     from pathlib import Path
@@ -226,7 +287,16 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m analysis.evidence", description=report.__doc__.split(".")[0])
     parser.add_argument("root", nargs="?", default="data/reference",
                         help="folder of stored reference runs (default: data/reference)")
+    parser.add_argument("--height-bands", nargs="+", metavar="RUN",
+                        help="instead of the report, print where the droplets of each RUN folder (a full run, a "
+                             "stored reference or a popbal run) are: height_bands at --time (default: each "
+                             "snapshot of a full run, the last output of a popbal run)")
+    parser.add_argument("--time", type=float, default=None, help="output time for --height-bands [s]")
+    parser.add_argument("--band", type=float, default=HEIGHT_BAND,
+                        help=f"thickness of the top and bottom bands for --height-bands [m] (default {HEIGHT_BAND})")
     args = parser.parse_args(argv)
+    if args.height_bands:
+        return _print_height_bands(parser.prog, args.height_bands, args.time, args.band)
     root = Path(args.root)
     if not root.is_dir() or not any((p / "reference.json").is_file() for p in root.iterdir()):
         print(f"{parser.prog}: error: {root} holds no stored reference run (no <name>/reference.json)",

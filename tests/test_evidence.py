@@ -114,3 +114,43 @@ def test_seed_scatter_of_runs_of_different_lengths_is_taken_over_their_common_sp
     assert scatter and all(abs(v) < 1e-12 for v in scatter.values())
     own = first[first["time"] > 50.0]["droplet_count"].mean() / second[second["time"] > 20.0]["droplet_count"].mean()
     assert own - 1.0 > 0.4
+
+
+def test_height_bands_count_a_full_runs_droplets_by_band():
+    from types import SimpleNamespace
+
+    from analysis.evidence import height_bands
+    z = np.array([0.001, 0.005, 0.0099, 0.02, 0.05, 0.0901, 0.0999])  # 3 in the bottom 10 mm, 2 in the top
+    run = SimpleNamespace(engine="fulldem", case=SimpleNamespace(geometry=SimpleNamespace(height=0.1)),
+                          snapshot_times=lambda: [5.0, 12.0], droplets=lambda t: (t, pd.DataFrame({"z": z})))
+    bands = height_bands(run)
+    assert (bands["time"], bands["bottom"], bands["middle"], bands["top"], bands["total"]) == (12.0, 3, 2, 2, 7)
+    assert height_bands(run, band=0.02)["bottom"] == 3 and height_bands(run, band=0.02)["top"] == 2
+    with pytest.raises(ValueError, match="band = 0.06"):
+        height_bands(run, band=0.06)
+
+
+def test_height_bands_of_a_popbal_run_add_up_to_its_count(tmp_path):
+    """popbal's number densities times zone area and cell height, summed over the bands, are the droplet count its
+    time series reports (a different sum of the same state: sections first)."""
+    from analysis import load_run
+    from analysis.evidence import height_bands
+    from settler.cli import main
+    assert main(["reduced", "demo", "--end-time", "4", "--output-interval", "1", "--out", str(tmp_path / "r"),
+                 "--quiet"]) == 0
+    run = load_run(tmp_path / "r")
+    for t in (2.0, 4.0):
+        bands = height_bands(run, t)
+        count = run.timeseries.set_index("time").loc[t, "droplet_count"]
+        assert bands["time"] == t and bands["total"] == pytest.approx(count, rel=1e-9)
+        assert bands["top"] > 0 and bands["middle"] > 0 and bands["bottom"] >= 0
+
+
+def test_height_bands_command_prints_each_snapshot_and_refuses_an_unreadable_run(tmp_path, capsys):
+    from analysis.evidence import main
+    assert main(["--height-bands", "data/reference/demo"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()[1:]]
+    assert [float(r[2]) for r in rows] == [13.0, 25.0] and all(int(r[3]) + int(r[4]) + int(r[5]) == int(r[6])
+                                                                 for r in rows)
+    assert main(["--height-bands", str(tmp_path / "none")]) == 2
+    assert "no such run folder" in capsys.readouterr().err
