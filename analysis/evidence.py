@@ -30,10 +30,9 @@ import pandas as pd
 
 from settler.output import half_volume_radius
 
-from .runs import REDUCED_ENGINE
-
 from .kernel_run import (EXPOSURE_FILE, collision_efficiency, kernel_exposure, kernel_run_efficiency,  # noqa: F401
                          pair_exposure, write_kernel_exposure)
+from .runs import REDUCED_ENGINE
 
 #: Burst cycle of the plume in simple and cubic [s] (measured on the old stored runs: 5-s bursts).
 CYCLE = 5.0
@@ -271,8 +270,8 @@ def _print_height_bands(prog: str, folders, time, band) -> int:
             print(f"{prog}: error: {exc}", file=sys.stderr)
             return 2
         for b in rows:
-            print(f"{Path(folder).name:28s} {run.engine or '?':8s} {b['time']:8.3g} {b['top']:8.0f} {b['middle']:8.0f} "
-                  f"{b['bottom']:8.0f} {b['total']:8.0f}")
+            print(f"{Path(folder).name:28s} {run.engine or '?':8s} {b['time']:8.3g} {b['top']:8.0f} "
+                  f"{b['middle']:8.0f} {b['bottom']:8.0f} {b['total']:8.0f}")
     return 0
 
 
