@@ -32,7 +32,7 @@ from settler.output import half_volume_radius
 
 from .kernel_run import (EXPOSURE_FILE, collision_efficiency, kernel_exposure, kernel_run_efficiency,  # noqa: F401
                          pair_exposure, write_kernel_exposure)
-from .runs import REDUCED_ENGINE
+from .runs import REDUCED_ENGINE, load_run
 
 #: Burst cycle of the plume in simple and cubic [s] (measured on the old stored runs: 5-s bursts).
 CYCLE = 5.0
@@ -193,8 +193,6 @@ def report(root="data/reference") -> str:
     cubic, deep's rim and density line, the resolution checks. ``python -m analysis.evidence [ROOT]``."""
     from pathlib import Path
 
-    from .runs import load_run
-
     root = Path(root)
     runs = {p.name: load_run(p) for p in sorted(root.iterdir()) if (p / "reference.json").is_file()}
     summaries = {name: run_summary(run) for name, run in runs.items()}
@@ -258,7 +256,6 @@ def _print_height_bands(prog: str, folders, time, band) -> int:
 
     from settler.errors import OutputError
 
-    from .runs import load_run
     print(f"{'run':28s} {'engine':8s} {'time [s]':>8s} {'top':>8s} {'middle':>8s} {'bottom':>8s} {'total':>8s}"
           f"   (droplets; top and bottom bands {1e3 * band:g} mm)")
     for folder in folders:

@@ -422,8 +422,7 @@ def busy_discount(number, diameters, growth_target, growth_rate, beta, pair_j, p
     """Discount a cell's kernel for partners that are busy: one merge at a time, each taking the pair's growth time.
 
     In the full engine a marked pair merges only after its growth time t_jk (settler.physics.growth_time, the
-    engine's own law), neither partner
-    can be marked again before, and only pairs of two free droplets are marked. A droplet of section j is therefore
+    engine's own law), neither partner can be marked again before, and only pairs of two free droplets are marked. A droplet of section j is therefore
     free a share f_j of the time with f_j = 1 / (1 + sum_k beta_jk N_k f_k t_jk): its merges per second with free
     partners times their duration (a handling time, as in Holling's type-II response; frozen over the step). The
     shares are solved by averaged substitution, f <- (f + 1 / (1 + L(f))) / 2, which contracts at least twofold per
