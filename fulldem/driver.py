@@ -147,6 +147,10 @@ def check_case(case) -> None:
                             f"pair's, {duration:.3g} s) with {duration / fd.dem_step:.3g} steps; allowed: 0 (chosen "
                             f"from the contact time, fulldem.contact_steps per contact) or at most {most:.3g} s "
                             f"({MIN_CONTACT_STEPS} steps per contact, the fewest fulldem.contact_steps allows)")
+    if fd.near_wall == "wall" and fd.kernel != "filtered":
+        raise CaseError(f"fulldem.near_wall = 'wall' with fulldem.kernel = {fd.kernel!r}: the walls' faces enter the "
+                        "filtered kernel's trilinear weights only; allowed: near_wall = 'interior', or kernel = "
+                        "'filtered'")
     if fd.kernel == "filtered" and not filtered_width_allowed(fd.sigma_cells):
         raise CaseError(f"fulldem.sigma_cells = {fd.sigma_cells:g}: the filtered kernel's trilinear step alone is "
                         f"wider; allowed: sigma_cells > 1/sqrt(6) = {1 / math.sqrt(6):.4f}, or fulldem.kernel = 'direct'")
@@ -233,7 +237,7 @@ def case_fingerprint(case) -> str:
 
 #: Case keys added after checkpoints existed, with the value that computes what the engine computed before the key:
 #: a checkpoint without the key resumes under that value (and only under it).
-KEYS_ADDED = {("coalescence", "trigger"): "first_contact"}
+KEYS_ADDED = {("coalescence", "trigger"): "first_contact", ("fulldem", "near_wall"): "interior"}
 
 
 def case_differences(saved: dict, case) -> list[str]:

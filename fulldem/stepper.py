@@ -189,6 +189,8 @@ class Simulation:
         # coupling tables and work arrays
         self.kernel = (fd.sigma_cells, fd.sigma_diameter, smoothing.DEFAULT_CUT)
         self.filtered = None
+        # the drag's velocity and reaction with the walls' boundary faces (fulldem.near_wall = "wall"; filtered only)
+        self.wall_faces = fd.near_wall == "wall" and fd.kernel == "filtered"
         self.mobility_ratios = MOBILITY_RATIOS
         if fd.kernel == "filtered":
             try:
@@ -267,10 +269,12 @@ class Simulation:
             array[...] = 0.0
         return array
 
-    def deposit_many(self, positions, values, components, outs, mode=smoothing.COMPUTE):
+    def deposit_many(self, positions, values, components, outs, mode=smoothing.COMPUTE, wall_faces=False):
         """Add rows of ``values`` (m, cap), deposited with the coupling kernel, to the arrays ``outs`` (m arrays, of
         ``components``: 0-2 faces, 3 cells), one pass; ``mode``: with the stencil table (see
-        :func:`fulldem.coupling.smoothing.droplet_stencils`). Returns ``outs``."""
+        :func:`fulldem.coupling.smoothing.droplet_stencils`); ``wall_faces``: the filtered kernel's trilinear step
+        gives the wall-normal boundary faces their share, which goes to the wall (``fulldem.near_wall``). Returns
+        ``outs``."""
         s, n, m = self.store, self.store.count, len(components)
         if self.filtered is None:
             smoothing.deposit_many(positions, s.diameter, values, n, components, tuple(outs), *self._grid_args(),
@@ -283,7 +287,8 @@ class Simulation:
             narrow[:, wide] = 0.0
         raws = [self._persistent(("raw", k), out.shape, zero=True) for k, out in enumerate(outs)]
         # trilinear weights are cheaper to recompute than to load from the stencil table (measured 2x)
-        smoothing.cic_deposit_many(positions, narrow, n, components, tuple(raws), *self._grid_args(), self._scratch_for(m))
+        smoothing.cic_deposit_many(positions, narrow, n, components, tuple(raws), *self._grid_args(), self._scratch_for(m),
+                                   wall_faces)
         for raw, out, c in zip(raws, outs, components):
             out += self.filtered.filter(raw, c)
         if wide.size:
@@ -292,9 +297,11 @@ class Simulation:
                             *self._grid_args(), *self.kernel, self._scratch_for(m), *smoothing.NO_TABLE, smoothing.COMPUTE)
         return outs
 
-    def interpolate_many(self, positions, fields, components, out, own=smoothing.NO_OWN, mode=smoothing.COMPUTE):
+    def interpolate_many(self, positions, fields, components, out, own=smoothing.NO_OWN, mode=smoothing.COMPUTE,
+                         wall_faces=False):
         """out[k, p] = the coupling kernel's interpolation of ``fields[k]`` (of ``components``) at droplet p; with
-        ``own`` (cap,), also each droplet's self weight sum_cells w_p^2. Returns ``out``."""
+        ``own`` (cap,), also each droplet's self weight sum_cells w_p^2; ``wall_faces``: the adjoint of
+        :meth:`deposit_many`'s. Returns ``out``."""
         s, n = self.store, self.store.count
         if self.filtered is None:
             smoothing.interpolate_many(positions, s.diameter, n, components, tuple(fields), out, own, *self._grid_args(),
@@ -302,7 +309,7 @@ class Simulation:
             return out
         filtered = tuple(self.filtered.filter(f, c, out=self._persistent(("filtered", k), f.shape))
                          for k, (f, c) in enumerate(zip(fields, components)))
-        smoothing.cic_interpolate_many(positions, n, components, filtered, out, *self._grid_args())
+        smoothing.cic_interpolate_many(positions, n, components, filtered, out, *self._grid_args(), wall_faces)
         if own.shape[0]:
             self.filtered.self_weight(positions, n, self.grid.spacing, self.lower, own)
         wide = self._wide()
@@ -453,6 +460,9 @@ class Simulation:
         seen = self.interpolated
         self.interpolate_many(s.position, (state.u, state.v, state.w, *pressure_force, phi_cells),
                               INTERPOLATE_COMPONENTS, seen, self.own, smoothing.LOAD)
+        if self.wall_faces:  # the slag velocity again, now with the walls' zero normal velocity (fulldem.near_wall)
+            self.interpolate_many(s.position, (state.u, state.v, state.w), INTERPOLATE_COMPONENTS[:3], seen[:3],
+                                  wall_faces=True)
         lap("interpolate")
         eps_around = self.eps_around
         forcing_rows(seen, self.own, volume, self.mass, self.density, self.gravity, inv_cell_volume, n,
@@ -482,7 +492,8 @@ class Simulation:
             raise RuntimeError("stepper: droplets were added, removed or reordered between the step's deposits; the "
                                "droplet set may change only at the step's event points (see the module docstring)")
         self.owed_force = self.deposit_many(self.start_position, values[:3], INTERPOLATE_COMPONENTS[:3],
-                                            [np.zeros(self.grid.face_shape(a)) for a in range(3)], smoothing.LOAD)
+                                            [np.zeros(self.grid.face_shape(a)) for a in range(3)], smoothing.LOAD,
+                                            self.wall_faces)
         lap("deposit drag")
         self.time += self.dt
         self.steps += 1

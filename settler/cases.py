@@ -195,6 +195,14 @@ SCHEMA: dict[str, dict[str, Field]] = {
                         "faster per coupled step at 130 000 droplets). Droplets wider than sigma_cells cells use "
                         "the direct kernel either way.",
                         choices=("filtered", "direct")),
+        "near_wall": Field(S, "", "The slag velocity a droplet's drag sees next to a wall: 'interior' (interior "
+                           "faces only: within a cell of a wall a droplet reads the wall-normal velocity of the faces "
+                           "one and two cells out, never the wall's zero; the reference set's engine) or 'wall' (the "
+                           "walls' boundary faces enter the filtered kernel's trilinear weights, so the wall-normal "
+                           "velocity a droplet sees falls linearly to zero at the wall, and the drag reaction's share "
+                           "on them goes to the wall; only with kernel = 'filtered', and droplets wider than "
+                           "sigma_cells cells keep the interior weights).",
+                           choices=("interior", "wall")),
         "hindrance": Field(S, "", "Void-fraction correction of the drag.", choices=HINDRANCE.names()),
         "self_correction": Field(B, "", "Remove the droplet's own disturbance from the interpolated velocity."),
         "advection": Field(B, "", "Fluid inertia (advection) on; off gives unsteady Stokes flow."),

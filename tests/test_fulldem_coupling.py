@@ -269,6 +269,86 @@ def test_filtered_kernel_conserves_and_is_adjoint(periodic, component):
     assert np.sum(out * field) == pytest.approx(np.sum(values * seen), rel=1e-12)
 
 
+def _wall_face_deposit(kernel, grid, pos, values, component):
+    """The two-step deposit with ``wall_faces`` (fulldem.near_wall = "wall")."""
+    n = len(pos)
+    raw = _field(grid, component)
+    smoothing.cic_deposit_many(pos, values.reshape(1, -1), n, np.array([component]), (raw,), *_args(grid),
+                               np.zeros((2, 1, *[s + 1 for s in grid.shape])), True)
+    return kernel.filter(raw, component)
+
+
+def _wall_face_interpolate(kernel, grid, pos, field, component):
+    n = len(pos)
+    out = np.zeros((1, n))
+    smoothing.cic_interpolate_many(pos, n, np.array([component]), (kernel.filter(field, component),), out,
+                                   *_args(grid), True)
+    return out[0]
+
+
+def test_wall_faces_let_the_wall_normal_velocity_fall_to_zero_at_the_wall():
+    """fulldem.near_wall = "wall": a uniform downflow W on every interior face of the wall-normal component (zero
+    on the boundary faces, as the no-penetration condition holds it) is seen by a droplet at height z within the
+    first cell as W z / h, linear interpolation to the wall's zero (to round-off); with the interior weights (the
+    reference set's engine) it sees W down to the wall. The tangential components are untouched."""
+    grid = Grid((6, 5, 8), 0.005, (0.0, 0.0, 0.0), (False, False, False))
+    kernel = filtered.FilteredKernel(grid.shape, grid.periodic, 1.0)
+    h = grid.spacing
+    z = np.array([0.05, 0.3, 0.6, 0.95, 1.0, 1.7, 4.0]) * h
+    pos = np.column_stack([np.full(z.size, 2.3 * h), np.full(z.size, 2.6 * h), z])
+    w = _field(grid, 2)
+    w[:, :, 1:-1] = -0.02  # m/s, uniform on the interior faces: the filter keeps it uniform there
+    seen = _wall_face_interpolate(kernel, grid, pos, w, 2)
+    np.testing.assert_allclose(seen, -0.02 * np.minimum(z / h, 1.0), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(_filtered_interpolate(kernel, grid, pos, w, 2), -0.02, rtol=0, atol=1e-15)
+    top = pos.copy()
+    top[:, 2] = grid.upper[2] - z  # the lid too
+    np.testing.assert_allclose(_wall_face_interpolate(kernel, grid, top, w, 2), -0.02 * np.minimum(z / h, 1.0),
+                               rtol=0, atol=1e-15)
+    u = _field(grid, 0)
+    u[1:-1] = 0.01  # tangential to the floor: not a wall-normal component there
+    np.testing.assert_allclose(_wall_face_interpolate(kernel, grid, pos, u, 0)[z > 0.5 * h], 0.01, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("component", [0, 1, 2, 3])
+def test_wall_faces_are_adjoint_and_give_the_wall_its_share(component):
+    """With the walls' faces in the trilinear weights the two-step kernel stays adjoint, <D v, f> = <v, I f>, and
+    the deposit falls short of the deposited total by exactly the wall faces' linear share, sum_p v_p (1 - s_p)
+    over the droplets within a face spacing s_p < 1 of a wall they face (what the wall takes); cell arrays and
+    periodic axes are unchanged."""
+    periodic = (False, True, False)
+    grid = Grid((12, 10, 14), 0.004, (0.1, -0.02, 0.0), periodic)
+    kernel = filtered.FilteredKernel(grid.shape, periodic, 1.0)
+    rng = np.random.default_rng(40 + component)
+    lo, hi = np.asarray(grid.lower), grid.upper
+    pos = lo + rng.uniform(0.0, 1.0, size=(120, 3)) * (hi - lo)
+    pos[:30, component % 3] = lo[component % 3] + rng.uniform(0.0, 1.0, 30) * grid.spacing  # next to the lower wall
+    values = rng.uniform(0.5, 2.0, 120)
+    out = _wall_face_deposit(kernel, grid, pos, values, component)
+    share = 0.0
+    if component < 3 and not periodic[component]:
+        s = (pos[:, component] - lo[component]) / grid.spacing
+        n = grid.shape[component]
+        share = np.sum(values * np.clip(1.0 - s, 0.0, 1.0)) + np.sum(values * np.clip(s - (n - 1), 0.0, 1.0))
+        assert share > 1.0
+    assert out.sum() == pytest.approx(values.sum() - share, rel=1e-13)
+    field = rng.normal(size=out.shape)
+    assert np.sum(out * field) == pytest.approx(np.sum(values * _wall_face_interpolate(kernel, grid, pos, field,
+                                                                                          component)), rel=1e-12)
+
+
+def test_near_wall_needs_the_filtered_kernel():
+    """fulldem.near_wall = "wall" with the direct kernel is refused, naming both keys and what is allowed."""
+    from fulldem.driver import check_case
+    from settler.cases import CaseError, case_with_overrides
+
+    case = case_with_overrides("demo", {"fulldem.near_wall": "wall", "fulldem.kernel": "direct"})
+    with pytest.raises(CaseError, match=r"fulldem.near_wall = 'wall' with fulldem.kernel = 'direct'.*allowed"):
+        check_case(case)
+    with pytest.raises(CaseError, match=r"near_wall.*'floor'.*allowed"):
+        case_with_overrides("demo", {"fulldem.near_wall": "floor"})
+
+
 def test_filtered_kernel_width_matches_the_direct_gaussian():
     """Away from walls the filtered kernel's spread per axis, averaged over where the droplet sits in its cell, is
     sigma^2 = (sigma_cells h)^2 (0.1 %): the linear hat's h^2/6 plus the filter's sigma_g^2;

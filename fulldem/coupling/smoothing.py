@@ -299,11 +299,13 @@ def interpolate_many(position, diameter, count, components, fields, out, own, sp
 
 
 @njit(cache=True)
-def _cic_pair(x, lower, spacing, n_cells, staggered, wall_normal, periodic):
+def _cic_pair(x, lower, spacing, n_cells, staggered, wall_normal, periodic, wall_faces=False):
     """Linear (cloud-in-cell) weights of the two nodes around coordinate x: (i0, i1, w0, w1), w0 + w1 = 1.
 
     Nodes are cell centres (staggered = False) or faces (staggered = True) of an axis with n_cells cells;
-    wall_normal: the two boundary faces of the wall-normal velocity component are excluded; periodic: indices wrap.
+    wall_normal: the two boundary faces of the wall-normal velocity component are excluded, unless wall_faces
+    (``fulldem.near_wall = "wall"``: they take their linear weights like any face, so that a field whose boundary
+    faces hold zero, the wall-normal velocity, goes to zero at the wall); periodic: indices wrap.
     On a walled axis a weight that would fall beyond the last valid node (the mirror half-cell next to a wall, or a
     wall-normal boundary face) goes to that node: then i1 = i0 and w1 = 0, so the weights always sum to one.
     """
@@ -319,7 +321,7 @@ def _cic_pair(x, lower, spacing, n_cells, staggered, wall_normal, periodic):
         return i0, i1, 1.0 - f, f
     high = n_cells if staggered else n_cells - 1
     low = 0
-    if wall_normal:
+    if wall_normal and not wall_faces:
         low, high = 1, high - 1
     if first < low:
         return low, low, 1.0, 0.0
@@ -329,13 +331,14 @@ def _cic_pair(x, lower, spacing, n_cells, staggered, wall_normal, periodic):
 
 
 @njit(cache=True)
-def _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights):
+def _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights, wall_faces=False):
     """Trilinear nodes of droplet p: nodes[st, axis, 0:2], weights[st, axis, 0:2] with st = 0 at cell centres and
-    st = 1 at the faces normal to that axis (the layout of :func:`stencils`; always two nodes)."""
+    st = 1 at the faces normal to that axis (the layout of :func:`stencils`; always two nodes). wall_faces: the
+    wall-normal boundary faces take their weights (:func:`_cic_pair`)."""
     for axis in range(3):
         for st in range(2):
             i0, i1, w0, w1 = _cic_pair(position[p, axis], lower[axis], spacing, shape[axis], st == 1,
-                                       st == 1 and not periodic[axis], periodic[axis])
+                                       st == 1 and not periodic[axis], periodic[axis], wall_faces)
             nodes[st, axis, 0] = i0
             nodes[st, axis, 1] = i1
             weights[st, axis, 0] = w0
@@ -343,9 +346,11 @@ def _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights):
 
 
 @njit(cache=True, parallel=True)
-def cic_deposit_many(position, values, count, components, out, spacing, lower, shape, periodic, scratch):
+def cic_deposit_many(position, values, count, components, out, spacing, lower, shape, periodic, scratch,
+                     wall_faces=False):
     """:func:`deposit_many` with trilinear weights (:func:`_cic_pair`): two nodes per axis, fixed loops; the first
-    step of :class:`FilteredKernel`. Same arguments, less the Gaussian's and the table's."""
+    step of :class:`FilteredKernel`. Same arguments, less the Gaussian's and the table's. wall_faces: the
+    wall-normal boundary faces take their share (which the filter then drops: the wall takes it)."""
     n_chunks = scratch.shape[0]
     m = components.shape[0]
     for chunk in prange(n_chunks):
@@ -354,7 +359,7 @@ def cic_deposit_many(position, values, count, components, out, spacing, lower, s
         buf = scratch[chunk]
         _zero_slab(buf, out, m)
         for p in range(chunk * count // n_chunks, (chunk + 1) * count // n_chunks):
-            _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights)
+            _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights, wall_faces)
             for k in range(m):
                 v = values[k, p]
                 if v == 0.0:
@@ -377,16 +382,17 @@ def cic_deposit_many(position, values, count, components, out, spacing, lower, s
 
 
 @njit(cache=True, parallel=True)
-def cic_interpolate_many(position, count, components, fields, out, spacing, lower, shape, periodic):
+def cic_interpolate_many(position, count, components, fields, out, spacing, lower, shape, periodic, wall_faces=False):
     """:func:`interpolate_many` with trilinear weights (:func:`_cic_pair`; no self weight); the adjoint
-    of :func:`cic_deposit_many` (the same weights: a node counted twice at a wall has weight 0 the second time)."""
+    of :func:`cic_deposit_many` with the same ``wall_faces`` (the same weights: a node counted twice at a wall has
+    weight 0 the second time)."""
     m = components.shape[0]
     n_chunks = min(count, CHUNKS)
     for chunk in prange(n_chunks):
         nodes = np.empty((2, 3, 2), dtype=np.int64)
         weights = np.empty((2, 3, 2))
         for p in range(chunk * count // n_chunks, (chunk + 1) * count // n_chunks):
-            _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights)
+            _cic_nodes(position, p, spacing, lower, shape, periodic, nodes, weights, wall_faces)
             for k in range(m):
                 field = fields[k]
                 sx, sy, sz = _stencil_sets(components[k])
