@@ -19,6 +19,9 @@ droplets, and the collision efficiency of the kernel run (SI units throughout).
 * :func:`height_bands` -- where a run's droplets are: the count in the top band (the roof layer), the bottom band
   (over the floor) and between, from a full run's snapshot or popbal's distribution alike, so that the two engines'
   counts can be compared zone by zone rather than as one number.
+* :func:`floor_arrivals` -- how a full run's droplets reach the floor: their count, mean vertical velocity against
+  their own settling velocity, and arrival rate within a thin layer over the floor, under the plume and away from
+  it.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from settler.derived import settling_velocity
 from settler.output import half_volume_radius
 
 from .kernel_run import (EXPOSURE_FILE, collision_efficiency, kernel_exposure, kernel_run_efficiency,  # noqa: F401
@@ -142,6 +146,45 @@ def height_bands(run, time: float | None = None, band: float = HEIGHT_BAND) -> d
     bottom = float(per_height[z < band].sum())
     total = float(per_height.sum())
     return {"time": float(at), "top": top, "bottom": bottom, "middle": total - top - bottom, "total": total}
+
+
+#: Layer over the floor of :func:`floor_arrivals` [m] and its rings around the inlet axis [m]: the plume's footprint
+#: (within one 5 mm cell of the axis), its edge, and the rest of the floor.
+FLOOR_LAYER = 1e-3
+FLOOR_RINGS = (5e-3, 15e-3)
+
+
+def floor_arrivals(run, time: float | None = None, layer: float = FLOOR_LAYER, rings=FLOOR_RINGS) -> list[dict]:
+    """How a full run's droplets reach the floor, at the snapshot nearest ``time`` [s] (default: the last): per ring
+    around the inlet axis (r < rings[0], rings[0] <= r < rings[1], r >= rings[1], r [m] the horizontal distance), the
+    droplets within ``layer`` [m] of the floor: {"ring" (inner, outer radius [m]), "count" [-], "velocity" (their mean
+    vertical velocity [m/s], negative down), "settling_velocity" (their mean single-droplet terminal velocity
+    [m/s]), "ratio" (minus the first over the second: 1 for droplets that cross the floor's wall layer at their own
+    settling speed), "arrival_rate" (count x max(0, -velocity) / layer [1/s]: droplets reaching the floor per
+    second), "time" [s]}. Where the slag's normal velocity falls to zero at the floor, droplets as small as the fed
+    ones (Stokes numbers ~1e-5) reach it at about their settling velocity; a ratio far above 1 that shrinks with
+    the cell is the grid's (docs/guide/full-model.md, "near a wall")."""
+    if run.engine == REDUCED_ENGINE:
+        raise ValueError("floor_arrivals: needs a full run's snapshot (droplet velocities); this is a popbal run")
+    if not (layer > 0.0 and all(b > a for a, b in zip((0.0, *rings), rings))):
+        raise ValueError(f"layer = {layer!r} m, rings = {rings!r} m: the layer must be > 0 and the ring radii "
+                         "increasing and > 0")
+    at, droplets = run.droplets(run.snapshot_times()[-1] if time is None else time)
+    near = droplets[droplets["z"] < layer]
+    axis = run.case.inlet_center
+    r = np.hypot(near["x"].to_numpy() - axis[0], near["y"].to_numpy() - axis[1])
+    edges = (0.0, *rings, math.inf)
+    out = []
+    for inner, outer in zip(edges[:-1], edges[1:]):
+        ring = near[(r >= inner) & (r < outer)]
+        count = len(ring)
+        w = float(ring["w"].mean()) if count else math.nan
+        settling = float(np.mean(settling_velocity(run.case, ring["diameter"].to_numpy(), ring["density"].to_numpy()))) \
+            if count else math.nan
+        out.append({"ring": (inner, outer), "count": count, "velocity": w, "settling_velocity": settling,
+                    "ratio": -w / settling if count else math.nan,
+                    "arrival_rate": count * max(0.0, -w) / layer if count else 0.0, "time": float(at)})
+    return out
 
 
 #: Steady quantities of the paper table and the seed scatter: time-series columns.
@@ -272,6 +315,29 @@ def _print_height_bands(prog: str, folders, time, band) -> int:
     return 0
 
 
+def _print_floor_arrivals(prog: str, folders, time, layer) -> int:
+    import sys
+    from pathlib import Path
+
+    from settler.errors import OutputError
+
+    print(f"{'run':28s} {'time [s]':>8s} {'ring [mm]':>10s} {'count':>6s} {'w [mm/s]':>9s} {'U_t [mm/s]':>10s} "
+          f"{'-w/U_t':>7s} {'arrivals [1/s]':>14s}   (droplets within {1e3 * layer:g} mm of the floor)")
+    for folder in folders:
+        try:
+            run = load_run(folder)
+            rows = floor_arrivals(run, time, layer)
+        except (OutputError, ValueError) as exc:
+            print(f"{prog}: error: {exc}", file=sys.stderr)
+            return 2
+        for f in rows:
+            inner, outer = f["ring"]
+            ring = f"{1e3 * inner:g}-{1e3 * outer:g}" if math.isfinite(outer) else f">{1e3 * inner:g}"
+            print(f"{Path(folder).name:28s} {f['time']:8.3g} {ring:>10s} {f['count']:6d} {1e3 * f['velocity']:9.2f} "
+                  f"{1e3 * f['settling_velocity']:10.2f} {f['ratio']:7.1f} {f['arrival_rate']:14.0f}")
+    return 0
+
+
 def main(argv=None) -> int:
     """``python -m analysis.evidence [ROOT]``: print :func:`report`; ``--height-bands RUN ...``: print
     :func:`height_bands` of each run instead. Exit status 0, 2 for a ROOT that holds no stored reference run or a RUN
@@ -287,12 +353,20 @@ def main(argv=None) -> int:
                         help="instead of the report, print where the droplets of each RUN folder (a full run, a "
                              "stored reference or a popbal run) are: height_bands at --time (default: each "
                              "snapshot of a full run, the last output of a popbal run)")
-    parser.add_argument("--time", type=float, default=None, help="output time for --height-bands [s]")
+    parser.add_argument("--floor", nargs="+", metavar="RUN",
+                        help="instead of the report, print how the droplets of each full RUN folder reach the floor "
+                             "(floor_arrivals: count, mean vertical velocity and settling velocity within --layer of "
+                             "the floor, in rings around the inlet axis) at --time (default: the last snapshot)")
+    parser.add_argument("--layer", type=float, default=FLOOR_LAYER,
+                        help=f"thickness of the floor layer for --floor [m] (default {FLOOR_LAYER})")
+    parser.add_argument("--time", type=float, default=None, help="output time for --height-bands and --floor [s]")
     parser.add_argument("--band", type=float, default=HEIGHT_BAND,
                         help=f"thickness of the top and bottom bands for --height-bands [m] (default {HEIGHT_BAND})")
     args = parser.parse_args(argv)
     if args.height_bands:
         return _print_height_bands(parser.prog, args.height_bands, args.time, args.band)
+    if args.floor:
+        return _print_floor_arrivals(parser.prog, args.floor, args.time, args.layer)
     root = Path(args.root)
     if not root.is_dir() or not any((p / "reference.json").is_file() for p in root.iterdir()):
         print(f"{parser.prog}: error: {root} holds no stored reference run (no <name>/reference.json)",

@@ -154,3 +154,41 @@ def test_height_bands_command_prints_each_snapshot_and_refuses_an_unreadable_run
                                                                  for r in rows)
     assert main(["--height-bands", str(tmp_path / "none")]) == 2
     assert "no such run folder" in capsys.readouterr().err
+
+
+def test_floor_arrivals_of_placed_droplets_by_ring():
+    """Droplets placed in and above a 1 mm floor layer, in the three rings around the inlet axis, at known vertical
+    velocities: counts, mean velocities, the terminal velocity of their size (settler.derived, the Stokes law at
+    the demo's Reynolds numbers: (rho_p - rho_s) g d^2 / (18 mu) within 1 %), the ratio and the arrival rate
+    count x (-w) / layer."""
+    from types import SimpleNamespace
+
+    from analysis.evidence import floor_arrivals
+    from settler.cases import load_case
+    case = load_case("demo")
+    cx, cy = case.inlet_center
+    d = 0.5e-3
+    frame = pd.DataFrame({"x": [cx + 0.001, cx, cx + 0.010, cx + 0.030, cx + 0.030, cx],
+                          "y": [cy, cy + 0.002, cy, cy, cy + 0.004, cy],
+                          "z": [0.0002, 0.0008, 0.0005, 0.0001, 0.0009, 0.003],  # the last above the layer
+                          "w": [-0.020, -0.010, -0.006, -0.001, 0.001, -0.050],
+                          "diameter": d, "density": case.matte.density})
+    run = SimpleNamespace(engine="fulldem", case=case, snapshot_times=lambda: [25.0],
+                          droplets=lambda t: (t, frame))
+    rings = floor_arrivals(run)
+    assert [r["count"] for r in rings] == [2, 1, 2]
+    assert [r["velocity"] for r in rings] == pytest.approx([-0.015, -0.006, 0.0], abs=1e-15)
+    stokes = (case.matte.density - case.slag.density) * 9.80665 * d**2 / (18.0 * case.slag_viscosity)
+    assert rings[0]["settling_velocity"] == pytest.approx(stokes, rel=0.01)
+    assert rings[0]["ratio"] == pytest.approx(0.015 / rings[0]["settling_velocity"], rel=1e-12)
+    assert [r["arrival_rate"] for r in rings] == pytest.approx([2 * 0.015 / 1e-3, 0.006 / 1e-3, 0.0], rel=1e-12)
+    with pytest.raises(ValueError, match="rings"):
+        floor_arrivals(run, rings=(0.015, 0.005))
+
+
+def test_floor_command_prints_the_rings_of_a_stored_run(capsys):
+    from analysis.evidence import main
+    assert main(["--floor", "data/reference/demo"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()[1:]]
+    assert [r[2] for r in rows] == ["0-5", "5-15", ">15"] and all(r[1] == "25" for r in rows)
+    assert main(["--floor", "data/reference/none"]) == 2
