@@ -200,8 +200,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
                            "one and two cells out, never the wall's zero; the reference set's engine) or 'wall' (the "
                            "walls' boundary faces enter the filtered kernel's trilinear weights, so the wall-normal "
                            "velocity a droplet sees falls linearly to zero at the wall, and the drag reaction's share "
-                           "on them goes to the wall; only with kernel = 'filtered', and droplets wider than "
-                           "sigma_cells cells keep the interior weights).",
+                           "on them goes to the wall; inlet and outlet faces count as walls; only with kernel = "
+                           "'filtered', and droplets wider than sigma_cells cells keep the interior weights).",
                            choices=("interior", "wall")),
         "hindrance": Field(S, "", "Void-fraction correction of the drag.", choices=HINDRANCE.names()),
         "self_correction": Field(B, "", "Remove the droplet's own disturbance from the interpolated velocity."),
