@@ -179,8 +179,8 @@ def floor_arrivals(run, time: float | None = None, layer: float = FLOOR_LAYER, r
         ring = near[(r >= inner) & (r < outer)]
         count = len(ring)
         w = float(ring["w"].mean()) if count else math.nan
-        settling = float(np.mean(settling_velocity(run.case, ring["diameter"].to_numpy(), ring["density"].to_numpy()))) \
-            if count else math.nan
+        terminal = settling_velocity(run.case, ring["diameter"].to_numpy(), ring["density"].to_numpy())
+        settling = float(np.mean(terminal)) if count else math.nan
         out.append({"ring": (inner, outer), "count": count, "velocity": w, "settling_velocity": settling,
                     "ratio": -w / settling if count else math.nan,
                     "arrival_rate": count * max(0.0, -w) / layer if count else 0.0, "time": float(at)})
@@ -293,49 +293,53 @@ def report(root="data/reference") -> str:
     return "\n".join(lines)
 
 
-def _print_height_bands(prog: str, folders, time, band) -> int:
+def _print_per_run(prog: str, folders, header: str, measure, lines) -> int:
+    """Print ``header``, then for each run folder the lines ``lines(name, run, measure(run))``; exit status 0, or 2
+    (the error on stderr) at the first folder that cannot be read or measured."""
     import sys
     from pathlib import Path
 
     from settler.errors import OutputError
 
-    print(f"{'run':28s} {'engine':8s} {'time [s]':>8s} {'top':>8s} {'middle':>8s} {'bottom':>8s} {'total':>8s}"
-          f"   (droplets; top and bottom bands {1e3 * band:g} mm)")
+    print(header)
     for folder in folders:
         try:
             run = load_run(folder)
-            times = [time] if time is not None or run.engine == REDUCED_ENGINE else run.snapshot_times()
-            rows = [height_bands(run, t, band) for t in times]
+            rows = measure(run)
         except (OutputError, ValueError) as exc:
             print(f"{prog}: error: {exc}", file=sys.stderr)
             return 2
-        for b in rows:
-            print(f"{Path(folder).name:28s} {run.engine or '?':8s} {b['time']:8.3g} {b['top']:8.0f} "
-                  f"{b['middle']:8.0f} {b['bottom']:8.0f} {b['total']:8.0f}")
+        for line in lines(Path(folder).name, run, rows):
+            print(line)
     return 0
+
+
+def _print_height_bands(prog: str, folders, time, band) -> int:
+    def measure(run):
+        times = [time] if time is not None or run.engine == REDUCED_ENGINE else run.snapshot_times()
+        return [height_bands(run, t, band) for t in times]
+
+    def lines(name, run, rows):
+        return [f"{name:28s} {run.engine or '?':8s} {b['time']:8.3g} {b['top']:8.0f} {b['middle']:8.0f} "
+                f"{b['bottom']:8.0f} {b['total']:8.0f}" for b in rows]
+
+    header = (f"{'run':28s} {'engine':8s} {'time [s]':>8s} {'top':>8s} {'middle':>8s} {'bottom':>8s} {'total':>8s}"
+              f"   (droplets; top and bottom bands {1e3 * band:g} mm)")
+    return _print_per_run(prog, folders, header, measure, lines)
 
 
 def _print_floor_arrivals(prog: str, folders, time, layer) -> int:
-    import sys
-    from pathlib import Path
+    def ring(f):
+        inner, outer = f["ring"]
+        return f"{1e3 * inner:g}-{1e3 * outer:g}" if math.isfinite(outer) else f">{1e3 * inner:g}"
 
-    from settler.errors import OutputError
+    def lines(name, run, rows):
+        return [f"{name:28s} {f['time']:8.3g} {ring(f):>10s} {f['count']:6d} {1e3 * f['velocity']:9.2f} "
+                f"{1e3 * f['settling_velocity']:10.2f} {f['ratio']:7.1f} {f['arrival_rate']:14.0f}" for f in rows]
 
-    print(f"{'run':28s} {'time [s]':>8s} {'ring [mm]':>10s} {'count':>6s} {'w [mm/s]':>9s} {'U_t [mm/s]':>10s} "
-          f"{'-w/U_t':>7s} {'arrivals [1/s]':>14s}   (droplets within {1e3 * layer:g} mm of the floor)")
-    for folder in folders:
-        try:
-            run = load_run(folder)
-            rows = floor_arrivals(run, time, layer)
-        except (OutputError, ValueError) as exc:
-            print(f"{prog}: error: {exc}", file=sys.stderr)
-            return 2
-        for f in rows:
-            inner, outer = f["ring"]
-            ring = f"{1e3 * inner:g}-{1e3 * outer:g}" if math.isfinite(outer) else f">{1e3 * inner:g}"
-            print(f"{Path(folder).name:28s} {f['time']:8.3g} {ring:>10s} {f['count']:6d} {1e3 * f['velocity']:9.2f} "
-                  f"{1e3 * f['settling_velocity']:10.2f} {f['ratio']:7.1f} {f['arrival_rate']:14.0f}")
-    return 0
+    header = (f"{'run':28s} {'time [s]':>8s} {'ring [mm]':>10s} {'count':>6s} {'w [mm/s]':>9s} {'U_t [mm/s]':>10s} "
+              f"{'-w/U_t':>7s} {'arrivals [1/s]':>14s}   (droplets within {1e3 * layer:g} mm of the floor)")
+    return _print_per_run(prog, folders, header, lambda run: floor_arrivals(run, time, layer), lines)
 
 
 def main(argv=None) -> int:

@@ -422,14 +422,14 @@ def busy_discount(number, diameters, growth_target, growth_rate, beta, pair_j, p
     """Discount a cell's kernel for partners that are busy: one merge at a time, each taking the pair's growth time.
 
     In the full engine a marked pair merges only after its growth time t_jk (settler.physics.growth_time, the
-    engine's own law), neither partner can be marked again before, and only pairs of two free droplets are marked. A droplet of section j is therefore
-    free a share f_j of the time with f_j = 1 / (1 + sum_k beta_jk N_k f_k t_jk): its merges per second with free
-    partners times their duration (a handling time, as in Holling's type-II response; frozen over the step). The
-    shares are solved by averaged substitution, f <- (f + 1 / (1 + L(f))) / 2, which contracts at least twofold per
-    sweep (to 1e-12, at most MAX_BUSY_SWEEPS), and each listed pair's kernel becomes beta_jk f_j f_k, in
-    ``pair_beta`` and in ``beta`` (K, K) alike. For one size in a dense cloud a droplet then merges (1 - f) / t
-    times a second, at most once per growth time, as in the engine. number (K,) [1/m^3], diameters (K,) [m]; free
-    and update (K,) and pair_load (P,) are work space (free ends holding the shares).
+    engine's own law), neither partner can be marked again before, and only pairs of two free droplets are marked. A
+    droplet of section j is therefore free a share f_j of the time with f_j = 1 / (1 + sum_k beta_jk N_k f_k t_jk):
+    its merges per second with free partners times their duration (a handling time, as in Holling's type-II
+    response; frozen over the step). The shares are solved by averaged substitution, f <- (f + 1 / (1 + L(f))) / 2,
+    which contracts at least twofold per sweep (to 1e-12, at most MAX_BUSY_SWEEPS), and each listed pair's kernel
+    becomes beta_jk f_j f_k, in ``pair_beta`` and in ``beta`` (K, K) alike. For one size in a dense cloud a droplet
+    then merges (1 - f) / t times a second, at most once per growth time, as in the engine. number (K,) [1/m^3],
+    diameters (K,) [m]; free and update (K,) and pair_load (P,) are work space (free ends holding the shares).
     """
     for p in range(pairs):  # beta_jk t_jk, once per pair rather than once per sweep
         pair_load[p] = pair_beta[p] * growth_time(diameters[pair_j[p]], diameters[pair_k[p]], growth_target,
