@@ -48,6 +48,10 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
+#: The closure sets of ``--closures`` (analysis.calibration.hierarchy.CLOSURES, not imported here so that the command
+#: line starts without the calibration package; a test holds the two equal).
+CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy")
+
 from settler.cases import CaseError, load_case
 from settler.output import OutputError, atomic_write_text, prepare_output_folder, read_time_series, source_commit, \
     to_json
@@ -579,12 +583,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--leave-out", default=None, metavar="FAMILY",
                         help="with --set: leave-one-family-out cross-validation, the registry's [families] FAMILY "
                              "held out as well (fitted on the rest, scored with the hold-outs); not with --write")
-    parser.add_argument("--closures", default="designed", choices=("designed", "layers", "busy"),
+    parser.add_argument("--closures", default="designed", choices=CLOSURE_NAMES,
                         help="with --set: the closure set fitted: 'designed' (plume and return flow), 'layers' "
                              "(with popbal's roof and bottom layers: the roof law from the zone diagnostics, the "
                              "bottom layer's thickness factor fitted in place of the return flow) or 'busy' "
                              "('designed' with popbal.busy_partners: one merge at a time per droplet, each taking the "
-                             "full engine's growth time); analysis.calibration.hierarchy.CLOSURES; default designed")
+                             "full engine's growth time) or 'layers_busy' (both); analysis.calibration.hierarchy.CLOSURES; "
+                             "default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
                              "no bands, the errors only)")

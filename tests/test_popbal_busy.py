@@ -99,4 +99,13 @@ def test_the_busy_closures_switch_it_on_in_the_fit_and_in_the_written_layer():
 
     assert CLOSURES["busy"]["switches"] == {"popbal.busy_partners": True}
     assert CLOSURES["busy"]["levels"] == CLOSURES["designed"]["levels"]
+    assert CLOSURES["layers_busy"]["switches"] == CLOSURES["busy"]["switches"]
+    assert CLOSURES["layers_busy"]["levels"] == CLOSURES["layers"]["levels"] and CLOSURES["layers_busy"]["layers"]
     assert "switches" not in CLOSURES["designed"] and "switches" not in CLOSURES["layers"]
+
+
+def test_the_command_line_offers_every_closure_set():
+    from analysis.calibrate import CLOSURE_NAMES
+    from analysis.calibration.hierarchy import CLOSURES
+
+    assert set(CLOSURE_NAMES) == set(CLOSURES)

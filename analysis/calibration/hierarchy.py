@@ -41,10 +41,14 @@ LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "return_flow_ratio"),
 #: where the bottom layer takes everything that reaches the floor; popbal.closures).
 #: 'busy' is 'designed' with popbal.busy_partners on: droplets merge one partner at a time, each merge taking the
 #: full engine's growth time (a switch taken from the engine's coalescence rule, not fitted; popbal.kernels).
+#: 'layers_busy' is 'layers' with the same switch: the roof where the full runs hold half their droplets, and
+#: one partner at a time where popbal's channel otherwise grows collectors.
+LAYER_LEVELS = {"transport": ("channel_coefficient", "bottom_layer_factor"), "whole": ("shear_coefficient",)}
+BUSY = {"popbal.busy_partners": True}
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
-            "layers": {"levels": {"transport": ("channel_coefficient", "bottom_layer_factor"),
-                                  "whole": ("shear_coefficient",)}, "layers": True},
-            "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": {"popbal.busy_partners": True}}}
+            "layers": {"levels": LAYER_LEVELS, "layers": True},
+            "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": BUSY},
+            "layers_busy": {"levels": LAYER_LEVELS, "layers": True, "switches": BUSY}}
 START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
          "bottom_layer_factor": 1.0}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
