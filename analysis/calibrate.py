@@ -48,10 +48,6 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
-#: The closure sets of ``--closures`` (analysis.calibration.hierarchy.CLOSURES, not imported here so that the command
-#: line starts without the calibration package; a test holds the two equal).
-CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy")
-
 from settler.cases import CaseError, load_case
 from settler.output import OutputError, atomic_write_text, prepare_output_folder, read_time_series, source_commit, \
     to_json
@@ -88,6 +84,10 @@ SIGMA_FLOOR = 0.01  # x |window mean|
 CORRELATION_LIMIT = 0.95
 RELATIVE_ERROR_LIMIT = 1.0
 SINGULAR_RATIO_LIMIT = 1e-3
+
+#: The closure sets of ``--closures`` (analysis.calibration.hierarchy.CLOSURES, not imported here so that the command
+#: line starts without the calibration package; a test holds the two equal).
+CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy")
 
 
 class CalibrationError(ValueError):
@@ -586,7 +586,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--closures", default="designed", choices=CLOSURE_NAMES,
                         help="with --set: the closure set fitted: 'designed' (plume and return flow), 'layers' "
                              "(with popbal's roof and bottom layers: the roof law from the zone diagnostics, the "
-                             "bottom layer's thickness factor fitted in place of the return flow) or 'busy' "
+                             "bottom layer's thickness factor fitted in place of the return flow), 'busy' "
                              "('designed' with popbal.busy_partners: one merge at a time per droplet, each taking the "
                              "full engine's growth time) or 'layers_busy' (both); analysis.calibration.hierarchy.CLOSURES; "
                              "default designed")
