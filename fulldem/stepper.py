@@ -44,10 +44,10 @@ from .coupling import filtered, mobility, smoothing
 from .coupling.drag import drag_coefficients
 from .coupling.exchange import (DEPOSIT_COMPONENTS, INTERPOLATE_COMPONENTS, drift_rows, forcing_rows, owed_rows,
                                 start_rows)
-from .dem.diagnostics import droplet_masses, max_speed
+from .dem.diagnostics import deepest_pair, droplet_masses, max_speed
 from .dem.laws import effective_mass, stable_step, stiffness_for_overlap
 from .dem.stepper import DemStepper
-from .droplets import DropletStore
+from .droplets import COALESCING, DropletStore
 from .fluid import solver
 from .fluid import walls as fluid_walls
 from .fluid.grid import Grid
@@ -486,6 +486,8 @@ class Simulation:
         # forces at the step's start: those of the rebuild above, or recomputed (the last sub-step's kick changed the
         # velocities, hence the dashpot forces, after its forces were computed)
         at_start = self.dem.max_overlap_ratio if rebuilt else self.dem.compute_forces()
+        # a failure's message names the pair while it still overlaps (contacts may push it apart within the step)
+        start_pair = self._deepest_pair_text("at the step's start") if at_start > fd.overlap_abort else None
         self.dem.advance(self.substeps, self.drift_velocity, self.impulse)
         self.drift_version = s.version  # drift_velocity's rows are the store's droplets while this holds
         lap("dem")
@@ -510,9 +512,29 @@ class Simulation:
             raise FloatingPointError(f"non-finite state at t = {self.time:.6g} s")
         if worst > fd.overlap_abort:
             raise FloatingPointError(f"runaway overlap: {worst:.3f} of a diameter at t = {self.time:.6g} s "
-                                     f"(fulldem.overlap_abort = {fd.overlap_abort})")
+                                     f"(fulldem.overlap_abort = {fd.overlap_abort}), "
+                                     + ("already at the step's start, where droplets had been placed or grown before it "
+                                        "(initial droplets, feed, merges)" if at_start > fd.overlap_abort
+                                        else "reached during the DEM sub-steps") + "; "
+                                     + (start_pair or self._deepest_pair_text("at the step's end")))
         lap("checks")
         return self.last
+
+    def _deepest_pair_text(self, when: str) -> str:
+        """The most overlapping pair of droplets now, described for a runaway overlap's message; ``when`` says at
+        which point of the step (an overlap reached during the sub-steps may have relaxed by the step's end)."""
+        s = self.store
+        i, j, ratio = deepest_pair(s.position, s.contact_diameter, s.partner, s.count)
+        if i < 0:
+            return f"no droplets overlap {when}"
+
+        def one(p):
+            state = "marked for coalescence" if s.flags[p] & COALESCING else "free"
+            where = ", ".join(f"{c * 1e3:.1f}" for c in s.position[p])
+            return (f"droplet {s.ident[p]} (diameter {s.diameter[p] * 1e3:.3g} mm, contact "
+                    f"{s.contact_diameter[p] * 1e3:.3g} mm, {state}, age {s.age[p]:.3g} s, at ({where}) mm)")
+
+        return f"deepest pair {when}: {ratio:.3f} of a diameter, {one(i)} and {one(j)}"
 
     def propose_merges(self, first, second):
         """Ask for pairs of droplets (indices at this step) to be merged at the step's end-of-step event point (see

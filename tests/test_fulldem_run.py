@@ -76,8 +76,13 @@ def test_blow_up_stops_with_last_good_state(tmp_path):
     csv = tmp_path / "drops.csv"
     csv.write_text("x,y,z,diameter\n0.05,0.05,0.05,0.001\n0.05,0.05,0.0502,0.001\n")
     case = load_case("demo", SMALL + ["fulldem.overlap_abort=0.5"])
-    with pytest.raises(RunError, match="runaway overlap.*last_good.npz"):
+    with pytest.raises(RunError, match="runaway overlap.*last_good.npz") as failure:
         run_case(case, tmp_path, end_time=0.1, droplets=csv, feed=False, progress=False, log=lambda *a: None)
+    # the message says when the overlap arose and names the pair: the two placed 0.2 mm apart overlap by 0.8 d
+    message = str(failure.value)
+    assert "already at the step's start" in message
+    assert "deepest pair at the step's start: 0.800 of a diameter, droplet 0 (diameter 1 mm, contact 1 mm, free" \
+        in message and "droplet 1 (" in message
     assert (tmp_path / "last_good.npz").exists()
     assert read_time_series(tmp_path / "timeseries.csv")["time"].iloc[0] == 0.0
 
@@ -99,3 +104,21 @@ def test_progress_eta_extrapolates_from_the_first_report(monkeypatch):
     first, second = stream.getvalue().splitlines()
     assert "ETA     nan s" in first
     assert "ETA    20.0 s" in second
+
+
+def test_the_deepest_pair_skips_coalescence_partners():
+    """deepest_pair names the most overlapping pair by the smaller contact diameter, exactly, and passes over a
+    marked pair (partners exert no contact force on each other, so their overlap is no failure)."""
+    import numpy as np
+
+    from fulldem.dem.diagnostics import deepest_pair
+
+    x = np.array([[0.0, 0.0, 0.0], [0.2e-3, 0.0, 0.0], [0.0, 0.0, 0.9e-3], [5e-3, 0.0, 0.0]])
+    d = np.array([1.0e-3, 1.0e-3, 0.5e-3, 1.0e-3])  # 0-1 overlap by 0.8 mm, 0-2 by 0.75 - 0.9 = -0.15 mm: apart
+    partner = np.array([1, 0, -1, -1])
+    assert deepest_pair(x, d, partner, 4) == (-1, -1, 0.0)  # only the partners touch
+    d[2] = 1.0e-3  # 0-2 now overlap by 1.0 - 0.9 = 0.1 mm: 0.1 of the smaller diameter
+    i, j, ratio = deepest_pair(x, d, partner, 4)
+    assert {i, j} == {0, 2} and ratio == pytest.approx(0.1, rel=1e-9)
+    partner[:] = -1  # unmarked, 0-1 is the deepest: 0.8 of a diameter
+    assert deepest_pair(x, d, partner, 4)[2] == pytest.approx(0.8, rel=1e-9)

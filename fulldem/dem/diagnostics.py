@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 
@@ -31,3 +32,26 @@ def droplet_masses(diameter, density, count, mass):
     """mass[p] = rho pi d^3 / 6 [kg] (written in place)."""
     for p in prange(count):
         mass[p] = density[p] * (math.pi / 6.0) * diameter[p] ** 3
+
+
+def deepest_pair(position, contact_diameter, partner, count):
+    """(i, j, overlap / smaller contact diameter) of the most overlapping pair of touching droplets among the first
+    ``count`` (mutual coalescence partners, which exert no contact force on each other, excepted); (-1, -1, 0.0) if
+    none touch. A whole-store search (scipy's k-d tree), for a failure's message, not for every step."""
+    from scipy.spatial import cKDTree
+
+    if count < 2:
+        return -1, -1, 0.0
+    x, d = position[:count], contact_diameter[:count]
+    pairs = cKDTree(x).query_pairs(r=float(d.max()), output_type="ndarray")
+    if pairs.size == 0:
+        return -1, -1, 0.0
+    i, j = pairs[:, 0], pairs[:, 1]
+    keep = partner[:count][i] != j
+    i, j = i[keep], j[keep]
+    overlap = 0.5 * (d[i] + d[j]) - np.sqrt(((x[i] - x[j]) ** 2).sum(axis=1))
+    ratio = overlap / np.minimum(d[i], d[j])
+    if ratio.size == 0 or ratio.max() <= 0.0:
+        return -1, -1, 0.0
+    k = int(ratio.argmax())
+    return int(i[k]), int(j[k]), float(ratio[k])
