@@ -511,12 +511,11 @@ class Simulation:
         if not np.isfinite(s.position[: s.count]).all() or not np.isfinite(state.u).all():
             raise FloatingPointError(f"non-finite state at t = {self.time:.6g} s")
         if worst > fd.overlap_abort:
+            origin = ("already at the step's start, where droplets had been placed or grown before it (initial "
+                      "droplets, feed, merges)" if start_pair else "reached during the DEM sub-steps")
+            pair = start_pair or self._deepest_pair_text("at the step's end")
             raise FloatingPointError(f"runaway overlap: {worst:.3f} of a diameter at t = {self.time:.6g} s "
-                                     f"(fulldem.overlap_abort = {fd.overlap_abort}), "
-                                     + ("already at the step's start, where droplets had been placed or grown before it "
-                                        "(initial droplets, feed, merges)" if at_start > fd.overlap_abort
-                                        else "reached during the DEM sub-steps") + "; "
-                                     + (start_pair or self._deepest_pair_text("at the step's end")))
+                                     f"(fulldem.overlap_abort = {fd.overlap_abort}), {origin}; {pair}")
         lap("checks")
         return self.last
 

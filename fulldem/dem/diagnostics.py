@@ -34,22 +34,29 @@ def droplet_masses(diameter, density, count, mass):
         mass[p] = density[p] * (math.pi / 6.0) * diameter[p] ** 3
 
 
+def near_pairs(position, diameter):
+    """Pairs (i, j) of centres closer than the largest diameter, with their distances [m] and overlaps (d_i + d_j)/2
+    - distance [m] (negative where they do not touch): the candidates of every whole-store overlap check (a droplet
+    list's validation, a failure's message). scipy's k-d tree: for checks, not for every step."""
+    from scipy.spatial import cKDTree
+
+    if len(position) < 2:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, np.zeros(0), np.zeros(0)
+    pairs = cKDTree(position).query_pairs(r=float(diameter.max()), output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    distance = np.sqrt(((position[i] - position[j]) ** 2).sum(axis=1))
+    return i, j, distance, 0.5 * (diameter[i] + diameter[j]) - distance
+
+
 def deepest_pair(position, contact_diameter, partner, count):
     """(i, j, overlap / smaller contact diameter) of the most overlapping pair of touching droplets among the first
     ``count`` (mutual coalescence partners, which exert no contact force on each other, excepted); (-1, -1, 0.0) if
-    none touch. A whole-store search (scipy's k-d tree), for a failure's message, not for every step."""
-    from scipy.spatial import cKDTree
-
-    if count < 2:
-        return -1, -1, 0.0
-    x, d = position[:count], contact_diameter[:count]
-    pairs = cKDTree(x).query_pairs(r=float(d.max()), output_type="ndarray")
-    if pairs.size == 0:
-        return -1, -1, 0.0
-    i, j = pairs[:, 0], pairs[:, 1]
+    none touch. For a failure's message (:func:`near_pairs`), not for every step."""
+    d = contact_diameter[:count]
+    i, j, _, overlap = near_pairs(position[:count], d)
     keep = partner[:count][i] != j
-    i, j = i[keep], j[keep]
-    overlap = 0.5 * (d[i] + d[j]) - np.sqrt(((x[i] - x[j]) ** 2).sum(axis=1))
+    i, j, overlap = i[keep], j[keep], overlap[keep]
     ratio = overlap / np.minimum(d[i], d[j])
     if ratio.size == 0 or ratio.max() <= 0.0:
         return -1, -1, 0.0

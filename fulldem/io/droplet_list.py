@@ -23,8 +23,8 @@ import re
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from ..dem.diagnostics import near_pairs
 from ..droplets import DropletStore
 
 
@@ -247,11 +247,8 @@ def read_droplet_list(path, *, lower, upper, slag_density, default_density, over
              pos[k, axis], bad.size, "droplets")
 
     if n > 1:
-        pairs = cKDTree(pos).query_pairs(r=float(d.max()), output_type="ndarray")
-        if len(pairs):
-            i, j = pairs[:, 0], pairs[:, 1]
-            dist = np.sqrt(((pos[i] - pos[j]) ** 2).sum(axis=1))
-            overlap = 0.5 * (d[i] + d[j]) - dist
+        i, j, dist, overlap = near_pairs(pos, d)
+        if len(i):
             too_much = (overlap > overlap_limit * np.minimum(d[i], d[j])) | (dist == 0.0)
             if too_much.any():
                 i, j, dist, overlap = i[too_much], j[too_much], dist[too_much], overlap[too_much]
