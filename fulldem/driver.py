@@ -153,7 +153,8 @@ def check_case(case) -> None:
                         "'filtered'")
     if fd.kernel == "filtered" and not filtered_width_allowed(fd.sigma_cells):
         raise CaseError(f"fulldem.sigma_cells = {fd.sigma_cells:g}: the filtered kernel's trilinear step alone is "
-                        f"wider; allowed: sigma_cells > 1/sqrt(6) = {1 / math.sqrt(6):.4f}, or fulldem.kernel = 'direct'")
+                        f"wider; allowed: sigma_cells > 1/sqrt(6) = {1 / math.sqrt(6):.4f}, or fulldem.kernel = 'direct' with "
+                        "fulldem.near_wall = 'interior'")
 
 
 def _dividing_sizes(edges, near) -> str:

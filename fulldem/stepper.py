@@ -197,7 +197,8 @@ class Simulation:
                 self.filtered = filtered.FilteredKernel(self.grid.shape, self.periodic, fd.sigma_cells, smoothing.DEFAULT_CUT)
             except ValueError as error:
                 raise ValueError(f"fulldem.kernel = 'filtered' with fulldem.sigma_cells = {fd.sigma_cells} on a "
-                                 f"{self.grid.shape} grid: {error}; use fulldem.kernel = 'direct'") from None
+                                 f"{self.grid.shape} grid: {error}; use fulldem.kernel = 'direct' (with "
+                                 f"fulldem.near_wall = 'interior')") from None
             # the filtered kernel's own discrete factor at sigma = sigma_cells h; wider droplets use the direct one
             wider = MOBILITY_RATIOS[MOBILITY_RATIOS > fd.sigma_cells * (1.0 + 1e-9)]
             self.mobility_ratios = np.concatenate([[fd.sigma_cells], wider])
