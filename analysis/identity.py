@@ -20,7 +20,7 @@ import numpy as np
 CLOCK_COLUMNS = ("wall_time",)
 #: The CSV outputs of a full run that are compared (those present in both folders).
 CSV_FILES = ("timeseries.csv", "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv",
-             "merges_by_size.csv")
+             "merges_by_size.csv", "merges_by_height.csv")
 
 
 def differences(a, b) -> list[str]:
@@ -38,7 +38,14 @@ def differences(a, b) -> list[str]:
                 out.append(f"checkpoint.npz: {name} differs")
         meta_a, meta_b = (_meta(c) for c in (ca, cb))
         for key in sorted(set(meta_a) | set(meta_b)):
-            if key not in CLOCK_COLUMNS and meta_a.get(key) != meta_b.get(key):
+            if key == "counters" and isinstance(meta_a.get(key), dict) and isinstance(meta_b.get(key), dict):
+                ka, kb = meta_a[key], meta_b[key]  # entry by entry: a counter added by a newer engine is named
+                for name in sorted(set(ka) | set(kb)):
+                    if name not in ka or name not in kb:
+                        out.append(f"checkpoint.npz: metadata counters.{name} only in {'b' if name in kb else 'a'}")
+                    elif ka[name] != kb[name]:
+                        out.append(f"checkpoint.npz: metadata counters.{name} differs")
+            elif key not in CLOCK_COLUMNS and meta_a.get(key) != meta_b.get(key):
                 out.append(f"checkpoint.npz: metadata {key} differs")
     compared = 0
     for file in CSV_FILES:

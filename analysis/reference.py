@@ -11,8 +11,9 @@ comparisons and the seed paper's figures need, in a folder of a few MB (SI units
 ``merges_by_size.csv``      copied as it is (a units line added where an older run lacks one), if the run has it
 ``channel_profile.csv``     copied as it is, if the run has it
 ``zone_profile.csv``,       the zone diagnostics (:data:`settler.output.SNAPSHOT_TABLES`), copied as they are, if the
-``zones.csv``,              run has them
-``lift_by_size.csv``
+``zones.csv``,              run has them (``merges_by_height.csv`` since 2026-12-05)
+``lift_by_size.csv``,
+``merges_by_height.csv``
 ``snapshots.npz``           a few droplet snapshots, chosen evenly over the run's snapshot times (always the last),
                             and the slag velocity on the central x-z plane of each (``np.savez_compressed``, float32;
                             keys below)
@@ -63,7 +64,8 @@ from .files import portable_path, read_json, read_zone_tables
 SIZE_LIMIT = 5_000_000
 #: Files copied unchanged from the run folder (the first two are required).
 REQUIRED_FILES = ("timeseries.csv", "case.toml")
-OPTIONAL_FILES = ("merges_by_size.csv", "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv")
+OPTIONAL_FILES = ("merges_by_size.csv", "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv",
+                  "merges_by_height.csv")
 SNAPSHOT_FILE = "snapshots.npz"
 INFO_FILE = "reference.json"
 #: Per-droplet arrays of ``snapshots.npz`` (name -> (unit, point_data field of the droplet .vtu)).

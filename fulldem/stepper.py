@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from settler.derived import settling_velocity
+from settler.output import PROFILE_BANDS
 from settler.physics import DRAG_LAWS, HINDRANCE, STANDARD_GRAVITY, FeedSchedule, sphere_mass, sphere_volume
 
 from .boundaries import boundaries_for
@@ -69,7 +70,9 @@ class Counters:
     the merged droplet would exceed the size limit); ``merges_reported`` (``marks_reported``,
     ``refused_reported``): ``merges`` (``marks``, ``refused_size``) at the last time-series row;
     ``merges_by_size``: merges by the size bins of the two droplets
-    (:func:`fulldem.submodels.coalescence.size_bin`, smaller first)."""
+    (:func:`fulldem.submodels.coalescence.size_bin`, smaller first); ``merges_by_height``: merges by the height band
+    (:data:`settler.output.PROFILE_BANDS`, from the bottom) and place (under the inlet, elsewhere) of the larger
+    droplet's centre (``merges_by_height.csv``, :func:`merge_places`)."""
 
     mass_fed: float = 0.0
     mass_settled: float = 0.0
@@ -86,18 +89,33 @@ class Counters:
     marks_reported: int = 0
     refused_reported: int = 0
     merges_by_size: np.ndarray = field(default_factory=empty_size_table)
+    merges_by_height: np.ndarray = field(default_factory=lambda: np.zeros((PROFILE_BANDS, 2), dtype=np.int64))
 
     def __post_init__(self):
         self.merges_by_size = np.asarray(self.merges_by_size, dtype=np.int64).reshape(empty_size_table().shape)
+        self.merges_by_height = np.asarray(self.merges_by_height, dtype=np.int64).reshape(PROFILE_BANDS, 2)
 
     def state(self) -> dict:
-        """Plain JSON-able numbers (the size table as nested lists)."""
-        return {**vars(self), "merges_by_size": self.merges_by_size.tolist()}
+        """Plain JSON-able numbers (the tables as nested lists)."""
+        return {**vars(self), "merges_by_size": self.merges_by_size.tolist(),
+                "merges_by_height": self.merges_by_height.tolist()}
 
     def totals(self) -> dict:
-        """The counts and masses without the size table (for summaries)."""
+        """The counts and masses without the tables (for summaries)."""
         return {k: v for k, v in vars(self).items()
-                if k not in ("merges_by_size", "merges_reported", "marks_reported", "refused_reported")}
+                if k not in ("merges_by_size", "merges_by_height", "merges_reported", "marks_reported",
+                             "refused_reported")}
+
+
+def merge_places(position, lower, height, inlet):
+    """(height band, place) of merges at ``position`` (n, 3) [m] in a slag of ``height`` [m] above ``lower`` [m]:
+    the band of :func:`settler.output.band_edges` (clipped to the slag) and 0 under ``inlet``
+    (:class:`fulldem.boundaries.Inlet`: its disk or slot extended down), 1 elsewhere; int64 arrays."""
+    position = np.asarray(position, dtype=float).reshape(-1, 3)
+    band = np.floor((position[:, 2] - lower[2]) / height * PROFILE_BANDS).astype(np.int64)
+    band = np.clip(band, 0, PROFILE_BANDS - 1)
+    place = np.where(inlet.contains(position[:, 0], position[:, 1]), 0, 1).astype(np.int64)
+    return band, place
 
 
 def contact_scales(case):
@@ -571,6 +589,9 @@ class Simulation:
         small = np.minimum(s.diameter[first], s.diameter[second])
         large = np.maximum(s.diameter[first], s.diameter[second])
         np.add.at(self.counters.merges_by_size, (size_bin(small), size_bin(large)), 1)
+        bigger = np.where(s.diameter[first] >= s.diameter[second], first, second)
+        np.add.at(self.counters.merges_by_height,
+                  merge_places(s.position[bigger], self.lower, self.grid.size[2], self.bounds.inlet), 1)
         self.counters.merges += int(first.size)
         return s.merge(first, second, self.lower, self.dem.neighbours.period)
 

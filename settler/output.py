@@ -138,10 +138,20 @@ LIFT_BY_SIZE: dict[str, tuple[str, str]] = {
     "rising_count": ("-", "those of them moving upward (velocity z > 0)"),
     "rising_velocity": ("m/s", "mean upward velocity of the rising ones (NaN: none)"),
 }
+#: Columns of ``merges_by_height.csv`` (full engine, at every snapshot, the :data:`PROFILE_BANDS` bands of the channel
+#: profile): where the merges happen, counted at the larger droplet's centre just before the merge, since the start
+#: of the run (differences between snapshots give the rate); "under the inlet" is the inlet's disk (a slot: its
+#: rectangle) extended down through the slag, the plume's and the roof layer's region.
+MERGES_BY_HEIGHT: dict[str, tuple[str, str]] = {
+    "time": ("s", "simulated time of the snapshot"),
+    "z": ("m", "height of the band's centre above the bottom"),
+    "merges_under_inlet": ("-", "merges in the band under the inlet since the start of the run"),
+    "merges_elsewhere": ("-", "merges in the band outside it since the start of the run"),
+}
 #: Tables a full run writes at every snapshot: file name -> columns (the zone diagnostics and the channel profile).
 SNAPSHOT_TABLES: dict[str, dict[str, tuple[str, str]]] = {
     "channel_profile.csv": CHANNEL_PROFILE, "zone_profile.csv": ZONE_PROFILE, "zones.csv": ZONES,
-    "lift_by_size.csv": LIFT_BY_SIZE}
+    "lift_by_size.csv": LIFT_BY_SIZE, "merges_by_height.csv": MERGES_BY_HEIGHT}
 
 
 #: Columns of ``merges_by_size.csv`` (full engine, coalescence on): the merges of a run by the size bins of the smaller
@@ -198,7 +208,8 @@ def read_channel_profile(path) -> pd.DataFrame:
 #: a folder holding any of them holds a run.
 RUN_FILES = ("case.toml", "metadata.json", "timeseries.csv", "timeseries.png", "summary.json", "checkpoint.npz",
              "last_good.npz", "snapshots.pvd", "droplets.png", "distribution.npz", "merges_by_size.csv",
-             "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv")
+             "channel_profile.csv", "zone_profile.csv", "zones.csv", "lift_by_size.csv",
+             "merges_by_height.csv")
 SNAPSHOT_PATTERNS = ("droplets_*.vtu", "fluid_*.vti", "fluid_*.vtu")
 
 

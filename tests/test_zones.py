@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from settler.cases import load_case
-from settler.output import LIFT_BY_SIZE, PROFILE_BANDS, ROOF_SHARE, ZONE_PROFILE, ZONES
+from settler.output import LIFT_BY_SIZE, MERGES_BY_HEIGHT, PROFILE_BANDS, ROOF_SHARE, ZONE_PROFILE, ZONES
 
 
 def test_return_radius_is_the_zero_of_a_field_linear_in_the_radius():
@@ -82,7 +82,8 @@ def test_zone_files_of_a_short_settling_run(tmp_path):
     droplets = tmp_path / "droplets.csv"
     droplets.write_text("\n".join(lines) + "\n")
     run_case(case, out, droplets=droplets, feed=False, progress=False)
-    for name, columns in (("zone_profile.csv", ZONE_PROFILE), ("zones.csv", ZONES), ("lift_by_size.csv", LIFT_BY_SIZE)):
+    for name, columns in (("zone_profile.csv", ZONE_PROFILE), ("zones.csv", ZONES), ("lift_by_size.csv", LIFT_BY_SIZE),
+                          ("merges_by_height.csv", MERGES_BY_HEIGHT)):
         table = read_table(out / name)
         assert list(table.columns) == list(columns)
         assert sorted(table["time"].unique()) == pytest.approx([0.0, 0.05, 0.1])
@@ -101,7 +102,7 @@ def test_zone_files_of_a_short_settling_run(tmp_path):
 
     assert render_all(out, tmp_path / "figures")["zones"] == tmp_path / "figures" / "zones.png"
     run = load_run(out)
-    assert set(run.zones) == {"zone_profile", "zones", "lift_by_size"}
+    assert set(run.zones) == {"zone_profile", "zones", "lift_by_size", "merges_by_height"}
     assert run.zones["zones"]["roof_thickness"].to_numpy() == pytest.approx(read_table(out / "zones.csv")
                                                                             ["roof_thickness"].to_numpy())
 
@@ -144,3 +145,55 @@ def test_slag_flux_through_a_plane_balances_the_droplets_in_a_closed_box():
         assert slag == pytest.approx(-droplets, rel=0.02)
         assert row["downward_slag_flux"] > 0.0 and row["upward_slag_flux"] > 0.0
     assert checked >= 4
+
+
+def test_merge_places_bands_and_the_inlet_region():
+    """merge_places: the band of a height (clipped to the slag) and whether (x, y) lies in the inlet's disk or slot,
+    by hand."""
+    from fulldem.boundaries import Inlet
+    from fulldem.stepper import merge_places
+
+    lower, height = np.zeros(3), 0.1
+    disk = Inlet((0.05, 0.05), 0.0125, 0.1)
+    points = np.array([[0.05, 0.05, 0.0], [0.06, 0.05, 0.0149], [0.0626, 0.05, 0.015], [0.05, 0.05, 0.0999],
+                       [0.0, 0.0, 0.12], [0.05, 0.05, -0.001]])
+    band, place = merge_places(points, lower, height, disk)
+    assert band.tolist() == [0, 1, 1, PROFILE_BANDS - 1, PROFILE_BANDS - 1, 0]
+    assert place.tolist() == [0, 0, 1, 0, 1, 0]
+    slot = Inlet((0.2, 0.025), 0.0125, 0.1, length=0.375)
+    _, place = merge_places(np.array([[0.38, 0.03, 0.05], [0.39, 0.03, 0.05], [0.2, 0.038, 0.05]]), lower, height,
+                            slot)
+    assert place.tolist() == [0, 1, 1]
+
+
+def test_merges_by_height_count_every_merge_once_where_it_happened(tmp_path):
+    """Two clusters of 150 touching 1 mm droplets, one under the inlet at 44-50 mm and one in a corner at 64-70 mm,
+    merging for 1 s (each falls less than 4 mm): the table's last snapshot holds as many merges as the run counted
+    (time series), all of them in the clusters' bands (40-50 and 60-70 mm) and places, and its counts never fall."""
+    from fulldem.driver import run_case
+    from settler.output import MERGES_BY_HEIGHT, read_table
+
+    out = tmp_path / "run"
+    case = load_case("demo", ["fulldem.end_time=1.0", "fulldem.snapshot_interval=0.25", "fulldem.output_interval=0.25",
+                              "feed.mass_rate=0", "fulldem.fluid_step=0.002"])
+    x0, y0 = case.geometry.width / 2, case.geometry.depth / 2
+    lattice = (np.stack(np.meshgrid(*[np.arange(5)] * 2, np.arange(6), indexing="ij"), -1).reshape(-1, 3) - 2.5) * 0.98e-3
+    rows = ["x,y,z,diameter"]
+    for centre in ((x0, y0, 0.047), (0.012, 0.012, 0.067)):
+        for p in np.array(centre) + lattice:
+            rows.append(f"{p[0]:.17g},{p[1]:.17g},{p[2]:.17g},1e-3")
+    droplets = tmp_path / "droplets.csv"
+    droplets.write_text("\n".join(rows) + "\n")
+    run_case(case, out, droplets=droplets, feed=False, progress=False)
+    table = read_table(out / "merges_by_height.csv")
+    assert list(table.columns) == list(MERGES_BY_HEIGHT)
+    last = table[table["time"] == table["time"].max()]
+    merges = int(read_table(out / "timeseries.csv")["merges"].sum())
+    assert merges > 20
+    assert int(last["merges_under_inlet"].sum() + last["merges_elsewhere"].sum()) == merges
+    under = last.set_index("z")["merges_under_inlet"]
+    elsewhere = last.set_index("z")["merges_elsewhere"]
+    assert under[under > 0].index.to_numpy() == pytest.approx([0.045])
+    assert elsewhere[elsewhere > 0].index.to_numpy() == pytest.approx([0.065])
+    for column in ("merges_under_inlet", "merges_elsewhere"):
+        assert (table.pivot(index="time", columns="z", values=column).diff().dropna() >= 0).all().all()

@@ -1,6 +1,6 @@
 """The zone diagnostics of a coupled run, as defined once in :mod:`settler.output` (:data:`~settler.output.ZONE_PROFILE`,
-:data:`~settler.output.ZONES`, :data:`~settler.output.LIFT_BY_SIZE`), written at every snapshot beside the channel
-profile: what the reduced model's zones (roof layer, plume core, downflow skirt, return annulus) can be fitted to.
+:data:`~settler.output.ZONES`, :data:`~settler.output.LIFT_BY_SIZE`, :data:`~settler.output.MERGES_BY_HEIGHT`),
+written at every snapshot beside the channel profile: what the reduced model's zones (roof layer, plume core, downflow skirt, return annulus) can be fitted to.
 
 The measures are plain functions of arrays (:func:`return_radius`, :func:`roof_layer`, :func:`lift_table`), checked
 against closed forms in tests/test_zones.py; :func:`snapshot_tables` applies them to a :class:`fulldem.stepper.
@@ -90,8 +90,8 @@ def _plane(sim, eps_w, z) -> tuple[np.ndarray, np.ndarray]:
 
 
 def snapshot_tables(sim, eps_faces) -> dict[str, list[dict]]:
-    """The rows of ``zone_profile.csv``, ``zones.csv`` and ``lift_by_size.csv`` at the current time (keys: file
-    names), ``eps_faces`` the face void fractions of the droplets' current positions
+    """The rows of ``zone_profile.csv``, ``zones.csv``, ``lift_by_size.csv`` and ``merges_by_height.csv`` at the
+    current time (keys: file names), ``eps_faces`` the face void fractions of the droplets' current positions
     (:meth:`fulldem.stepper.Simulation.void_fraction`)."""
     from fulldem.submodels.coalescence import SIZE_BINS
 
@@ -136,4 +136,7 @@ def snapshot_tables(sim, eps_faces) -> dict[str, list[dict]]:
               "roof_peak_fraction": peak, "rising_count": int(rising.sum()),
               "rising_volume": float(volume[rising].sum())}]
     lift = [{"time": sim.time, **row} for row in lift_table(s.diameter[:n][below], vz[below], SIZE_BINS)]
-    return {"zone_profile.csv": profile, "zones.csv": zones, "lift_by_size.csv": lift}
+    places = sim.counters.merges_by_height
+    merges = [{"time": sim.time, "z": 0.5 * (low + high), "merges_under_inlet": int(places[k, 0]),
+               "merges_elsewhere": int(places[k, 1])} for k, (low, high) in enumerate(zip(edges[:-1], edges[1:]))]
+    return {"zone_profile.csv": profile, "zones.csv": zones, "lift_by_size.csv": lift, "merges_by_height.csv": merges}
