@@ -34,8 +34,9 @@ import numpy as np
 import pandas as pd
 
 from settler.cases import Case
-from settler.output import (CHANNEL_PROFILE, MID_BAND, atomic_write_bytes, band_edges, time_series_frame,
-                            write_channel_profile, write_run_metadata, write_time_series)
+from settler.output import (CHANNEL_PROFILE, MERGES_BY_HEIGHT, MID_BAND, atomic_write_bytes, band_edges,
+                            time_series_frame, write_channel_profile, write_run_metadata, write_table,
+                            write_time_series)
 
 from . import limits
 from .closures import settling_share
@@ -61,6 +62,8 @@ DISTRIBUTION_ARRAYS: dict[str, tuple[str, str]] = {
     "fed_mass": ("kg", "(T, K) matte mass fed since t = 0, per section"),
     "settled_mass": ("kg", "(T, K) matte mass settled since t = 0, per section"),
     "lost_mass": ("kg", "(T, K) matte mass lost with the slag since t = 0, per section"),
+    "merges": ("-", "(T, Z, J) coalescence events since t = 0 in each zone's cells (the droplets coalescence removed; "
+                    "the roof layer's in its top cell, the bottom layer's in its bottom cell)"),
 }
 
 
@@ -114,9 +117,29 @@ class Result:
         return pd.DataFrame({"original_diameter": self.arrays["original_diameter"], "fed_mass": fed,
                              "settled_mass": settled, "lost_mass": lost, "loss_fraction": fraction})
 
+    def merges_by_height(self) -> pd.DataFrame:
+        """The coalescence events since t = 0 at every output in the height bands of
+        :data:`settler.output.MERGES_BY_HEIGHT`, as the full engine counts them: "under the inlet" the roof layer
+        and the channel zone, "elsewhere" the outer zone and the bottom layer (the channel is the plume's
+        cross-section, R_c, not the inlet's disk; the bottom layer spans the floor). Empty without the ``merges``
+        array."""
+        if "merges" not in self.arrays:
+            return pd.DataFrame(columns=list(MERGES_BY_HEIGHT))
+        merges, z = self.arrays["merges"], self.arrays["z"]
+        under = merges[:, ROOF] + merges[:, CHANNEL]
+        elsewhere = merges[:, OUTER] + merges[:, BOTTOM]
+        edges = band_edges(self.case.geometry.height)
+        rows = []
+        for n, t in enumerate(self.arrays["time"]):
+            for low, high in zip(edges[:-1], edges[1:]):
+                cells = (z >= low) & (z < high) if high < edges[-1] else (z >= low)
+                rows.append({"time": t, "z": 0.5 * (low + high), "merges_under_inlet": float(under[n, cells].sum()),
+                             "merges_elsewhere": float(elsewhere[n, cells].sum())})
+        return pd.DataFrame(rows, columns=list(MERGES_BY_HEIGHT))
+
     def save(self, out_dir: str | os.PathLike, distribution: bool = True) -> Path:
-        """Write timeseries.csv, channel_profile.csv, distribution.npz, case.toml and metadata.json into out_dir
-        (atomically).
+        """Write timeseries.csv, channel_profile.csv, merges_by_height.csv, distribution.npz, case.toml and
+        metadata.json into out_dir (atomically).
 
         distribution=False leaves out distribution.npz (and its entry in metadata.json), deleting one an earlier
         run left in out_dir: a sweep's points need only the time series, and compressing the (T, Z, J, K) arrays
@@ -126,6 +149,7 @@ class Result:
         out.mkdir(parents=True, exist_ok=True)
         write_time_series(self.timeseries, out / "timeseries.csv")
         write_channel_profile(self.channel_profile.to_dict("records"), out / "channel_profile.csv")
+        write_table(self.merges_by_height().to_dict("records"), MERGES_BY_HEIGHT, out / "merges_by_height.csv")
         extra = {}
         if distribution:
             buffer = io.BytesIO()
@@ -194,13 +218,16 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
 
 
 class _Books:
-    """Cumulative amounts per section [absolute: droplets, m^3 x droplets, kg] and reacted FeS [kg]."""
+    """Cumulative amounts per section [absolute: droplets, m^3 x droplets, kg], reacted FeS [kg] and coalescence
+    events per zone and cell [-] (``merges``; ``merges_reported``: their total at the last time-series row)."""
 
-    def __init__(self, sections: int):
+    def __init__(self, sections: int, cells: int = 1):
         self.fed = np.zeros((QUANTITIES, sections))
         self.settled = np.zeros((QUANTITIES, sections))
         self.lost = np.zeros((QUANTITIES, sections))
         self.reacted = 0.0
+        self.merges = np.zeros((len(ZONES), cells))
+        self.merges_reported = 0.0
 
 
 def _mass(model: Model, amounts: np.ndarray) -> np.ndarray:
@@ -275,6 +302,9 @@ def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: 
     lost = float(_mass(model, books.lost).sum())
     row.update(mass_fed=fed, mass_settled=settled, mass_lost=lost, mass_reacted=books.reacted,
                mass_balance_error=(fed - in_slag - settled - lost - books.reacted) / max(fed, 1e-300))
+    merged = float(books.merges.sum())
+    row["merges"] = merged - books.merges_reported
+    books.merges_reported = merged
     with np.errstate(invalid="ignore", divide="ignore"):
         occupied = number > 0.0
         mean_age = np.where(occupied, content[:, :, AGE, :] / (number * model.grid.pivots), np.nan)
@@ -282,7 +312,8 @@ def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: 
     arrays = {"number_density": number.copy(), "diameter": diameter, "mean_age": mean_age,
               "fed_number": books.fed[NUMBER].copy(), "settled_number": books.settled[NUMBER].copy(),
               "lost_number": books.lost[NUMBER].copy(), "fed_mass": _mass(model, books.fed),
-              "settled_mass": _mass(model, books.settled), "lost_mass": _mass(model, books.lost)}
+              "settled_mass": _mass(model, books.settled), "lost_mass": _mass(model, books.lost),
+              "merges": books.merges.copy()}
     return row, arrays
 
 
@@ -322,12 +353,15 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
             _reach_floor(model, work, books, area)
         books.lost += work.sink_out * area
         if p["coalescence"]:
+            before = content[zone, :, NUMBER, :].sum(axis=1)
             most = max(most, coalesce_zone(
                 content[zone], work.diameters[zone], work.velocities[zone], work.densities[zone],
                 work.volume_fraction[zone], work.shear[zone], grid.pivots, grid.target, grid.loss_weight, dt,
                 p["density_slag"], p["interfacial_tension"], p["psi"], p["virtual_mass"], p["form"],
                 p["threshold"], p["rule"], p["efficiency"], p["speed_limit"], p["max_rate_step"], work.beta,
                 work.births, work.k1, work.k2, work.trial, p["busy_partners"], p["growth_target"], p["growth_rate"]))
+            # each binary event removes one droplet (the cell-average technique keeps number and volume of births)
+            books.merges[zone] += (before - content[zone, :, NUMBER, :].sum(axis=1)) * area * dz
         removed = react_zone(content[zone], grid.pivots, grid.diameters, model.reacting, model.x_initial,
                              model.x_final, model.time_constant, dt)
         books.reacted += removed * dz * area
@@ -459,7 +493,7 @@ def run(model: Model | Case | str, end_time: float | None = None, output_interva
     grid, cells, dz = model.grid, model.cells, model.cell_height
     content = np.zeros((len(ZONES), cells, QUANTITIES, grid.size))
     work = _Work(cells, grid.size)
-    books = _Books(grid.size)
+    books = _Books(grid.size, cells)
     # the roof drains into the channel, channel and outer zone into the bottom layer
     zones = [z for z in (ROOF, CHANNEL, OUTER, BOTTOM) if model.zone_area[z] > 0.0]
     numbers = model.numbers()

@@ -43,7 +43,8 @@ TIME_SERIES: dict[str, tuple[str, str]] = {
     "coalesced_count": ("-", "droplets in the slag formed by coalescence (seed paper Fig. 15; full engine, NaN in reduced)"),
     "uncoalesced_count": ("-", "droplets in the slag that never coalesced (seed paper Fig. 15; full engine, NaN in "
                                "reduced)"),
-    "merges": ("-", "coalescence events since the previous row (full engine; NaN in reduced)"),
+    "merges": ("-", "coalescence events since the previous row (reduced: the droplets coalescence removed, not "
+                    "an integer)"),
     "pairs_marked": ("-", "pairs marked for the delayed merge since the previous row (full engine; NaN in reduced)"),
     "merges_refused_by_size": ("-", "evaluated pairs refused since the previous row because the merged droplet would "
                                     "exceed coalescence.size_limit (full engine; NaN in reduced)"),
@@ -138,10 +139,11 @@ LIFT_BY_SIZE: dict[str, tuple[str, str]] = {
     "rising_count": ("-", "those of them moving upward (velocity z > 0)"),
     "rising_velocity": ("m/s", "mean upward velocity of the rising ones (NaN: none)"),
 }
-#: Columns of ``merges_by_height.csv`` (full engine, at every snapshot, the :data:`PROFILE_BANDS` bands of the channel
-#: profile): where the merges happen, counted at the larger droplet's centre just before the merge, since the start
+#: Columns of ``merges_by_height.csv`` (full engine at every snapshot, popbal at every output; the :data:`PROFILE_BANDS`
+#: bands of the channel profile): where the merges happen, counted at the larger droplet's centre just before the merge, since the start
 #: of the run (differences between snapshots give the rate); "under the inlet" is the inlet's disk (a slot: its
-#: rectangle) extended down through the slag, the plume's and the roof layer's region.
+#: rectangle) extended down through the slag, the plume's and the roof layer's region (popbal: its roof layer and
+#: channel zone, :meth:`popbal.driver.Result.merges_by_height`).
 MERGES_BY_HEIGHT: dict[str, tuple[str, str]] = {
     "time": ("s", "simulated time of the snapshot"),
     "z": ("m", "height of the band's centre above the bottom"),

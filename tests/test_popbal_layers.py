@@ -99,6 +99,11 @@ def test_layers_keep_the_mass_with_coalescence_and_reaction():
     assert np.abs(result.timeseries["mass_balance_error"]).max() < 1e-10
     assert result.arrays["number_density"][-1][ROOF].sum() > 0.0
     assert result.arrays["number_density"][-1][CHANNEL].sum() > 0.0
+    # number accounting with the layers: fed = in slag + settled + lost + coalescence events, the roof's counted
+    a, ts = result.arrays, result.timeseries
+    merged = a["fed_number"][-1].sum() - ts.droplet_count.iloc[-1] - a["settled_number"][-1].sum() \
+        - a["lost_number"][-1].sum()
+    assert a["merges"][-1].sum() == pytest.approx(merged, rel=1e-9) and a["merges"][-1][ROOF].sum() > 0.0
 
 
 @pytest.mark.parametrize("overrides, names", [

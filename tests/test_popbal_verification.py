@@ -133,6 +133,15 @@ def test_mass_accounting_closes_with_everything_on():
     # coalescence happened: fewer droplets than fed minus removed
     gone = result.settled_number[-1].sum() + result.lost_number[-1].sum()
     assert last.droplet_count < result.fed_number[-1].sum() - gone
+    # number accounting: every droplet fed is in the slag, settled, lost, or removed by one coalescence event
+    merged = result.fed_number.sum(axis=1) - ts.droplet_count - result.settled_number.sum(axis=1) \
+        - result.lost_number.sum(axis=1)
+    assert result.merges.sum(axis=(1, 2)) == pytest.approx(merged, rel=1e-9, abs=1e-9 * result.fed_number[-1].sum())
+    assert ts.merges.sum() == pytest.approx(merged.iloc[-1], rel=1e-9) and merged.iloc[-1] > 0.0
+    table = result.merges_by_height()
+    last_table = table[table.time == ts.time.iloc[-1]]
+    assert (last_table.merges_under_inlet.sum() + last_table.merges_elsewhere.sum()) == pytest.approx(
+        merged.iloc[-1], rel=1e-12)
 
 
 def test_mass_accounting_closes_in_the_horizontal_column():
