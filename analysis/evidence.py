@@ -19,6 +19,8 @@ droplets, and the collision efficiency of the kernel run (SI units throughout).
 * :func:`height_bands` -- where a run's droplets are: the count in the top band (the roof layer), the bottom band
   (over the floor) and between, from a full run's snapshot or popbal's distribution alike, so that the two engines'
   counts can be compared zone by zone rather than as one number.
+* :func:`merge_shares` -- where a run merges over a window: from ``merges_by_height.csv`` (full engine since
+  a04ea13, popbal), the merge rate and its shares under the inlet, in the top and the bottom band, band by band.
 * :func:`floor_arrivals` -- how a full run's droplets reach the floor: their count, mean vertical velocity against
   their own settling velocity, and arrival rate within a thin layer over the floor, under the plume and away from
   it.
@@ -146,6 +148,37 @@ def height_bands(run, time: float | None = None, band: float = HEIGHT_BAND) -> d
     bottom = float(per_height[z < band].sum())
     total = float(per_height.sum())
     return {"time": float(at), "top": top, "bottom": bottom, "middle": total - top - bottom, "total": total}
+
+
+def merge_shares(run, window: tuple[float, float] | None = None) -> dict:
+    """Where ``run`` (an :class:`analysis.Run` of either engine, or a folder) merged between the ``merges_by_height``
+    rows nearest the ``window`` (start, end) [s] (default: its steady window, else its last third,
+    :func:`window_of`): {"window" (the rows' times) [s], "merges" [-], "rate" [1/s], "under_inlet", "top", "bottom"
+    (shares of the merges under the inlet, in the top and in the bottom height band) [-], "bands" (a DataFrame: z
+    [m], merges_under_inlet, merges_elsewhere over the window [-])}; shares NaN without merges. Raises ValueError for
+    a run without the table (full runs made before a04ea13) or a window shorter than its snapshot spacing."""
+    run = load_run(run)
+    table = run.zones.get("merges_by_height")
+    if table is None or table.empty:
+        raise ValueError(f"{run.folder}: no merges_by_height.csv (full runs made before a04ea13 lack it)")
+    if window is None:
+        window, _ = window_of(run.timeseries)
+    times = np.unique(table["time"].to_numpy(dtype=float))
+    t0 = float(times[np.argmin(np.abs(times - window[0]))])
+    t1 = float(times[np.argmin(np.abs(times - window[1]))])
+    if not t1 > t0:
+        raise ValueError(f"{run.folder}: window {window[0]:g}-{window[1]:g} s holds no two merges_by_height rows "
+                         f"(snapshots at {times[0]:g}-{times[-1]:g} s)")
+    first = table[table["time"] == t0].set_index("z")
+    last = table[table["time"] == t1].set_index("z")
+    columns = ["merges_under_inlet", "merges_elsewhere"]
+    bands = (last[columns] - first[columns]).reset_index().sort_values("z").reset_index(drop=True)
+    merges = float(bands[columns].to_numpy().sum())
+    per_band = bands[columns].sum(axis=1).to_numpy()
+    share = (lambda x: float(x) / merges) if merges > 0.0 else (lambda x: math.nan)
+    return {"window": (t0, t1), "merges": merges, "rate": merges / (t1 - t0),
+            "under_inlet": share(bands["merges_under_inlet"].sum()), "top": share(per_band[-1]),
+            "bottom": share(per_band[0]), "bands": bands}
 
 
 #: Layer over the floor of :func:`floor_arrivals` [m] and its rings around the inlet axis [m]: the plume's footprint
@@ -342,6 +375,18 @@ def _print_floor_arrivals(prog: str, folders, time, layer) -> int:
     return _print_per_run(prog, folders, header, lambda run: floor_arrivals(run, time, layer), lines)
 
 
+def _print_merge_shares(prog: str, folders) -> int:
+    def lines(name, run, m):
+        per_band = m["bands"][["merges_under_inlet", "merges_elsewhere"]].sum(axis=1).to_numpy()
+        profile = " ".join(f"{x / m['merges']:.2f}" if m["merges"] > 0 else "nan" for x in per_band[::-1])
+        return [f"{name:28s} {run.engine or '?':8s} {m['window'][0]:7.4g}-{m['window'][1]:<7.4g} {m['rate']:10.4g} "
+                f"{m['under_inlet']:7.3f} {m['top']:6.3f} {m['bottom']:7.3f}   {profile}"]
+
+    header = (f"{'run':28s} {'engine':8s} {'window [s]':>15s} {'rate [1/s]':>10s} {'inlet':>7s} {'top':>6s} "
+              f"{'bottom':>7s}   shares by height band, top first (merges over the steady window or last third)")
+    return _print_per_run(prog, folders, header, merge_shares, lines)
+
+
 def main(argv=None) -> int:
     """``python -m analysis.evidence [ROOT]``: print :func:`report`; ``--height-bands RUN ...``: print
     :func:`height_bands` of each run instead. Exit status 0, 2 for a ROOT that holds no stored reference run or a RUN
@@ -361,6 +406,10 @@ def main(argv=None) -> int:
                         help="instead of the report, print how the droplets of each full RUN folder reach the floor "
                              "(floor_arrivals: count, mean vertical velocity and settling velocity within --layer of "
                              "the floor, in rings around the inlet axis) at --time (default: the last snapshot)")
+    parser.add_argument("--merges", nargs="+", metavar="RUN",
+                        help="instead of the report, print where each RUN folder (a full run since a04ea13, a "
+                             "stored reference that has merges_by_height.csv, or a popbal run) merged over its "
+                             "steady window (else its last third): merge_shares")
     parser.add_argument("--layer", type=float, default=FLOOR_LAYER,
                         help=f"thickness of the floor layer for --floor [m] (default {FLOOR_LAYER})")
     parser.add_argument("--time", type=float, default=None, help="output time for --height-bands and --floor [s]")
@@ -371,6 +420,8 @@ def main(argv=None) -> int:
         return _print_height_bands(parser.prog, args.height_bands, args.time, args.band)
     if args.floor:
         return _print_floor_arrivals(parser.prog, args.floor, args.time, args.layer)
+    if args.merges:
+        return _print_merge_shares(parser.prog, args.merges)
     root = Path(args.root)
     if not root.is_dir() or not any((p / "reference.json").is_file() for p in root.iterdir()):
         print(f"{parser.prog}: error: {root} holds no stored reference run (no <name>/reference.json)",

@@ -192,3 +192,50 @@ def test_floor_command_prints_the_rings_of_a_stored_run(capsys):
     rows = [line.split() for line in capsys.readouterr().out.splitlines()[1:]]
     assert [r[2] for r in rows] == ["0-5", "5-15", ">15"] and all(r[1] == "25" for r in rows)
     assert main(["--floor", "data/reference/none"]) == 2
+
+
+def test_merge_shares_of_a_table_with_known_counts(tmp_path):
+    """merge_shares: the merges between the rows nearest the window are the differences of the cumulative table, by
+    band and place, and the shares follow; a run without the table or a window inside one snapshot is refused."""
+    from analysis.evidence import merge_shares
+    from settler.output import MERGES_BY_HEIGHT, PROFILE_BANDS, write_table
+
+    folder = tmp_path / "run"
+    folder.mkdir()
+    pd.DataFrame({"time": [0.0, 1.0, 2.0], "droplet_count": [1.0, 2.0, 3.0]}).to_csv(folder / "timeseries.csv",
+                                                                                   index=False)
+    z = (np.arange(PROFILE_BANDS) + 0.5) * 0.01
+    under = {0.0: np.zeros(PROFILE_BANDS), 1.0: np.arange(PROFILE_BANDS) * 1.0,
+             2.0: np.arange(PROFILE_BANDS) * 1.0 + np.eye(PROFILE_BANDS)[-1] * 30.0}
+    elsewhere = {0.0: np.zeros(PROFILE_BANDS), 1.0: np.full(PROFILE_BANDS, 2.0),
+                 2.0: np.full(PROFILE_BANDS, 2.0) + np.eye(PROFILE_BANDS)[0] * 10.0}
+    rows = [{"time": t, "z": zk, "merges_under_inlet": under[t][k], "merges_elsewhere": elsewhere[t][k]}
+            for t in (0.0, 1.0, 2.0) for k, zk in enumerate(z)]
+    write_table(rows, MERGES_BY_HEIGHT, folder / "merges_by_height.csv")
+    m = merge_shares(folder, (0.9, 2.1))  # rows 1.0 and 2.0: 30 in the top band under the inlet, 10 at the bottom
+    assert m["window"] == (1.0, 2.0) and m["merges"] == 40.0 and m["rate"] == 40.0
+    assert (m["under_inlet"], m["top"], m["bottom"]) == (0.75, 0.75, 0.25)
+    assert m["bands"]["merges_under_inlet"].tolist() == [0.0] * (PROFILE_BANDS - 1) + [30.0]
+    m = merge_shares(folder, (0.0, 1.0))
+    assert m["merges"] == sum(range(PROFILE_BANDS)) + 2.0 * PROFILE_BANDS and m["top"] == pytest.approx(
+        (PROFILE_BANDS - 1 + 2.0) / m["merges"])
+    with pytest.raises(ValueError, match="no two merges_by_height rows"):
+        merge_shares(folder, (1.1, 1.2))
+    (folder / "merges_by_height.csv").unlink()
+    with pytest.raises(ValueError, match="no merges_by_height.csv"):
+        merge_shares(folder)
+
+
+def test_merge_shares_of_a_popbal_run_are_its_booked_merges(tmp_path):
+    """A popbal run saved and read back: merge_shares over 5-10 s holds the merges popbal booked in that time (its
+    distribution array and its time series' column alike), to the CSV's precision."""
+    import popbal
+    from analysis.evidence import merge_shares
+
+    result = popbal.run(popbal.setup("demo", popbal__end_time=10), progress=False)
+    result.save(tmp_path / "run")
+    m = merge_shares(tmp_path / "run", (5.0, 10.0))
+    t = result.arrays["time"]
+    booked = result.arrays["merges"][t == 10.0].sum() - result.arrays["merges"][t == 5.0].sum()
+    assert m["merges"] == pytest.approx(booked, rel=1e-6) and booked > 0.0
+    assert m["merges"] == pytest.approx(result.timeseries.set_index("time")["merges"].loc[5.5:10.0].sum(), rel=1e-6)
