@@ -139,11 +139,11 @@ LIFT_BY_SIZE: dict[str, tuple[str, str]] = {
     "rising_count": ("-", "those of them moving upward (velocity z > 0)"),
     "rising_velocity": ("m/s", "mean upward velocity of the rising ones (NaN: none)"),
 }
-#: Columns of ``merges_by_height.csv`` (full engine at every snapshot, popbal at every output; the :data:`PROFILE_BANDS`
-#: bands of the channel profile): where the merges happen, counted at the larger droplet's centre just before the merge, since the start
-#: of the run (differences between snapshots give the rate); "under the inlet" is the inlet's disk (a slot: its
-#: rectangle) extended down through the slag, the plume's and the roof layer's region (popbal: its roof layer and
-#: channel zone, :meth:`popbal.driver.Result.merges_by_height`).
+#: Columns of ``merges_by_height.csv`` (full engine at every snapshot, popbal at every output; the
+#: :data:`PROFILE_BANDS` bands of the channel profile): where the merges happen, counted at the larger droplet's
+#: centre just before the merge, since the start of the run (differences between snapshots give the rate); "under
+#: the inlet" is the inlet's disk (a slot: its rectangle) extended down through the slag, the plume's and the roof
+#: layer's region (popbal: its roof layer and channel zone, :meth:`popbal.driver.Result.merges_by_height`).
 MERGES_BY_HEIGHT: dict[str, tuple[str, str]] = {
     "time": ("s", "simulated time of the snapshot"),
     "z": ("m", "height of the band's centre above the bottom"),

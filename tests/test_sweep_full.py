@@ -140,3 +140,38 @@ def test_settler_sweep_set_refuses_a_case_and_only_without_set(tmp_path, capsys)
     assert "--only nothing: not in" in capsys.readouterr().err
     assert main(["sweep", "--engine", "full", "--out", str(tmp_path / "o")]) == 2
     assert "no CASE" in capsys.readouterr().err
+
+
+def test_status_reads_where_each_run_stands_without_running_anything(tmp_path, capsys):
+    """--status on a set whose first run is done and whose second has a time series at 0.01 s (wall time growing
+    5 s per 0.002 s simulated): done / started with its pace (2 500 s/s) and time to go (0.01 s left: 25 s); nothing
+    is run (no new folder appears); --status without --set is refused."""
+    import pandas as pd
+
+    from analysis.sweep import POINTS
+    from analysis.sweep.runset import format_status, set_status
+    from settler.cli import main
+
+    path = _short_set(tmp_path)
+    out = tmp_path / "o"
+    runs = {r.name: r for r in load_run_set(path).runs}
+    base, double = (out / POINTS / point_hash(runs[n].case, "full") for n in ("base", "double"))
+    base.mkdir(parents=True)
+    double.mkdir(parents=True)
+    (base / DONE_FILE).write_text(json.dumps({"status": "done", "hash": base.name}))
+    t = np.arange(0.0, 0.0101, 0.002)
+    pd.DataFrame({"time": t, "droplet_count": 1.0, "wall_time": 10.0 + 2500.0 * t}).to_csv(
+        double / "timeseries.csv", index=False)
+    table = set_status(path, "full", out, now=(double / "timeseries.csv").stat().st_mtime + 120.0).set_index("name")
+    assert table.loc["base", "state"] == "done" and table.loc["base", "remaining"] == 0.0
+    assert table.loc["double", "state"] == "started" and table.loc["double", "time"] == pytest.approx(0.01)
+    assert table.loc["double", "pace"] == pytest.approx(2500.0)
+    assert table.loc["double", "remaining"] == pytest.approx(25.0)
+    assert table.loc["double", "updated"] == pytest.approx(120.0, abs=1.0)
+    text = format_status(table.reset_index(), workers=2)
+    assert "1 of 2 runs done" in text and "2 min ago" in text
+    assert main(["sweep", "--set", str(path), "--engine", "full", "--out", str(out), "--status"]) == 0
+    assert "started" in capsys.readouterr().out
+    assert sorted(p.name for p in (out / POINTS).iterdir()) == sorted([base.name, double.name])
+    assert main(["sweep", "demo", "feed.mass_rate=0.001,0.002", "--status", "--out", str(out)]) == 2
+    assert "--status: allowed only with --set" in capsys.readouterr().err

@@ -177,7 +177,8 @@ def test_merges_by_height_count_every_merge_once_where_it_happened(tmp_path):
     case = load_case("demo", ["fulldem.end_time=1.0", "fulldem.snapshot_interval=0.25", "fulldem.output_interval=0.25",
                               "feed.mass_rate=0", "fulldem.fluid_step=0.002"])
     x0, y0 = case.geometry.width / 2, case.geometry.depth / 2
-    lattice = (np.stack(np.meshgrid(*[np.arange(5)] * 2, np.arange(6), indexing="ij"), -1).reshape(-1, 3) - 2.5) * 0.98e-3
+    grid = np.meshgrid(np.arange(5), np.arange(5), np.arange(6), indexing="ij")
+    lattice = (np.stack(grid, -1).reshape(-1, 3) - 2.5) * 0.98e-3
     rows = ["x,y,z,diameter"]
     for centre in ((x0, y0, 0.047), (0.012, 0.012, 0.067)):
         for p in np.array(centre) + lattice:

@@ -10,7 +10,7 @@ from settler.cases import CaseError, case_with_overrides
 
 from .designs import DEFAULT_SAMPLES, DESIGNS
 from .execution import ENGINES, ERROR_FILE, POINTS, sweep
-from .runset import sweep_set
+from .runset import format_status, set_status, sweep_set
 
 
 def add_arguments(parser):
@@ -56,6 +56,11 @@ def add_arguments(parser):
                              "data/reference/design.toml; see analysis.sweep.runset) instead of a design over CASE")
     parser.add_argument("--only", metavar="NAMES", default=None,
                         help="with --set: only these runs (comma-separated names)")
+    parser.add_argument("--status", action="store_true",
+                        help="with --set: run nothing; print where each run of the set stands in --out (done, "
+                             "started: simulated time reached, wall time, recent pace and time still to go at it, "
+                             "when its time series was last written; not started) and the total still to go "
+                             "(spread over --workers if given)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -69,6 +74,8 @@ def main(args) -> int:
         return _main_set(args)
     if args.only is not None:
         raise CaseError(f"--only {args.only}: allowed only with --set")
+    if args.status:
+        raise CaseError("--status: allowed only with --set (a set's runs have their own folders to read)")
     if args.case is None:
         raise CaseError("no CASE: allowed: a preset name or a case TOML path, then the axes (or --set FILE)")
     base = case_with_overrides(args.case)
@@ -104,6 +111,9 @@ def _main_set(args) -> int:
         raise CaseError(f"--set {args.run_set} with {given!r}: allowed: --set alone (each run names its case and "
                         "overrides in the file)")
     out = args.out if args.out is not None else f"sweep-{Path(args.run_set).stem}"
+    if args.status:
+        print(format_status(set_status(args.run_set, args.engine, out, args.only), args.workers))
+        return 0
     try:
         result = sweep_set(args.run_set, args.engine, out, args.workers, args.scheduler, args.only,
                            progress=not args.quiet, command_line=getattr(args, "command_line", None))

@@ -204,6 +204,87 @@ def sweep_set(path, engine: str = "full", out="sweep-set", workers: int | None =
     return result
 
 
+#: Time-series rows at the end of a full point over which :func:`set_status` measures its recent pace [-].
+PACE_ROWS = 20
+
+
+def set_status(path, engine: str = "full", out="sweep-set", only=None, now: float | None = None) -> pd.DataFrame:
+    """Where each run of the set file ``path`` (or those in ``only``) stands in the sweep folder ``out``, read from
+    its point folder without running anything: one row per run with ``name``, ``state`` ("done", "failed",
+    "started": a point with a time series but no done.json, running or interrupted; "not started"),
+    ``time`` and ``end_time`` [s] (simulated, reached and to reach), ``wall_time`` [s] (the run's own wall clock so
+    far), ``pace`` [s/s] (wall seconds per simulated second over its last :data:`PACE_ROWS` rows), ``remaining``
+    [s] (wall time still to go at that pace), ``updated`` [s] (since its time series was last written: a large value
+    means it is not running). Raises CaseError for a set file or ``only`` it refuses (as :func:`sweep_set`)."""
+    from settler.output import read_time_series
+
+    check_engine(engine)
+    runs = load_run_set(path).runs
+    if only:
+        wanted = [w for w in (only.split(",") if isinstance(only, str) else only) if w]
+        names = {r.name for r in runs}
+        missing = [w for w in wanted if w not in names]
+        if missing:
+            raise CaseError(f"--only {','.join(missing)}: not in {path}; allowed: {', '.join(sorted(names))}")
+        runs = [r for r in runs if r.name in wanted]
+    now = time.time() if now is None else now
+    rows = []
+    for run in runs:
+        digest = point_hash(run.case, engine, run.droplets if engine == "full" else None)
+        folder = Path(out) / POINTS / digest
+        end = float(run.case.fulldem.end_time if engine == "full" else run.case.popbal.end_time)
+        row = {"name": run.name, "hash": digest, "state": "not started", "time": math.nan, "end_time": end,
+               "wall_time": math.nan, "pace": math.nan, "remaining": math.nan, "updated": math.nan}
+        done = read_done(folder)
+        series_path = folder / "timeseries.csv"
+        if series_path.is_file():
+            try:
+                series = read_time_series(series_path)
+            except (OSError, ValueError):
+                series = None
+            if series is not None and len(series):
+                row.update(state="started", time=float(series["time"].iloc[-1]),
+                           updated=max(0.0, now - series_path.stat().st_mtime))
+                if "wall_time" in series:
+                    row["wall_time"] = float(series["wall_time"].iloc[-1])
+                    tail = series.iloc[-PACE_ROWS:]
+                    span = float(tail["time"].iloc[-1] - tail["time"].iloc[0])
+                    if span > 0.0:
+                        row["pace"] = float(tail["wall_time"].iloc[-1] - tail["wall_time"].iloc[0]) / span
+                        row["remaining"] = max(0.0, end - row["time"]) * row["pace"]
+        if done is not None:
+            row["state"] = "done" if done.get("status") == "done" else "failed"
+            row["remaining"] = 0.0 if row["state"] == "done" else math.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def format_status(table: pd.DataFrame, workers: int | None = None) -> str:
+    """:func:`set_status`'s table as text, with totals: runs done, wall time still to go (one core) and, for
+    ``workers`` > 1, that time spread over them (a lower bound: the longest run may take longer alone)."""
+    def hours(x):
+        return "-" if not math.isfinite(x) else (f"{x / 3600:.1f} h" if x >= 3600 else f"{x / 60:.0f} min")
+
+    lines = [f"{'run':28s} {'state':12s} {'simulated [s]':>15s} {'wall':>8s} {'pace [s/s]':>10s} {'to go':>8s} "
+             f"{'written':>10s}"]
+    for r in table.itertuples():
+        reached = f"{r.time:.4g} / {r.end_time:.4g}" if math.isfinite(r.time) else f"- / {r.end_time:.4g}"
+        written = f"{hours(r.updated)} ago" if math.isfinite(r.updated) else "-"
+        pace = f"{r.pace:.4g}" if math.isfinite(r.pace) else "-"
+        lines.append(f"{r.name:28s} {r.state:12s} {reached:>15s} {hours(r.wall_time):>8s} {pace:>10s} "
+                     f"{hours(r.remaining):>8s} {written:>10s}")
+    known = table["remaining"].dropna()
+    unknown = int(table["remaining"].isna().sum())
+    total = float(known.sum())
+    text = (f"{int((table['state'] == 'done').sum())} of {len(table)} runs done; at least {hours(total)} of one core "
+            f"still to go for the runs with a pace")
+    if unknown:
+        text += f" (and {unknown} runs not started or without a pace yet)"
+    if workers and workers > 1:
+        text += f"; about {hours(max(total / workers, float(known.max()) if len(known) else 0.0))} on {workers} workers"
+    return "\n".join(lines + [text])
+
+
 def _write_set_netcdf(table: pd.DataFrame, path: Path, engine: str, source) -> Path:
     """sweep.nc of a run set: the table over the dimension ``name`` (h5netcdf), units in the attrs."""
     import xarray as xr
@@ -215,4 +296,4 @@ def _write_set_netcdf(table: pd.DataFrame, path: Path, engine: str, source) -> P
     return write_dataset(dataset, path)
 
 
-__all__ = ["RUN_KEYS", "RunSet", "SetResult", "SetRun", "load_run_set", "sweep_set"]
+__all__ = ["RUN_KEYS", "RunSet", "SetResult", "SetRun", "format_status", "load_run_set", "set_status", "sweep_set"]

@@ -1,6 +1,7 @@
 """The zone diagnostics of a coupled run, as defined once in :mod:`settler.output` (:data:`~settler.output.ZONE_PROFILE`,
 :data:`~settler.output.ZONES`, :data:`~settler.output.LIFT_BY_SIZE`, :data:`~settler.output.MERGES_BY_HEIGHT`),
-written at every snapshot beside the channel profile: what the reduced model's zones (roof layer, plume core, downflow skirt, return annulus) can be fitted to.
+written at every snapshot beside the channel profile: what the reduced model's zones (roof layer, plume core,
+downflow skirt, return annulus) can be fitted to.
 
 The measures are plain functions of arrays (:func:`return_radius`, :func:`roof_layer`, :func:`lift_table`), checked
 against closed forms in tests/test_zones.py; :func:`snapshot_tables` applies them to a :class:`fulldem.stepper.
