@@ -266,7 +266,7 @@ def density_line(droplets: pd.DataFrame) -> tuple[float, float]:
 
 def report(root="data/reference") -> str:
     """The reference set's evidence as text: each stored run's steady summary, the seed scatter of simple and
-    cubic, deep's rim and density line, the resolution checks. ``python -m analysis.evidence [ROOT]``."""
+    cubic, deep's rim and density line, the collision efficiency, where the runs merge, the resolution checks. ``python -m analysis.evidence [ROOT]``."""
     from pathlib import Path
 
     root = Path(root)
@@ -313,6 +313,14 @@ def report(root="data/reference") -> str:
             centres = ", ".join(f"{1e3 * c:.0f}" for c in r["centres_50"])
             lines.append(f"{name} channels at t = {r['time']:g} s (central x-z plane): {r['n_25']} / {r['n_50']} / "
                          f"{r['n_75']} at 1/4, 1/2, 3/4 of the height; at mid-height centred at x = {centres} mm")
+    for name, run in runs.items():  # where the runs merge (runs made since a04ea13 have the table)
+        table = run.zones.get("merges_by_height")
+        if table is None or table.empty or not run.case.coalescence.enabled:
+            continue
+        m = merge_shares(run, (summaries[name]["start"], summaries[name]["end_time"]))
+        lines.append(f"{name} merges over {m['window'][0]:.0f}-{m['window'][1]:.0f} s: {m['rate']:.4g} per s, "
+                     f"{100 * m['under_inlet']:.0f} % under the inlet, {100 * m['top']:.0f} % in the top tenth of "
+                     f"the height, {100 * m['bottom']:.0f} % in the bottom tenth")
     for coarse, fine in RESOLUTION_PAIRS:
         if coarse in runs and fine in runs:
             end = min(summaries[fine]["end_time"], summaries[coarse]["end_time"])

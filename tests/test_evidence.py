@@ -239,3 +239,26 @@ def test_merge_shares_of_a_popbal_run_are_its_booked_merges(tmp_path):
     booked = result.arrays["merges"][t == 10.0].sum() - result.arrays["merges"][t == 5.0].sum()
     assert m["merges"] == pytest.approx(booked, rel=1e-6) and booked > 0.0
     assert m["merges"] == pytest.approx(result.timeseries.set_index("time")["merges"].loc[5.5:10.0].sum(), rel=1e-6)
+
+
+def test_report_says_where_a_run_with_the_merge_table_merges(tmp_path):
+    """The report's merges line for a stored run given a merges_by_height.csv: 100 merges in the top band under the
+    inlet and 100 elsewhere in the bottom band between the table's first and last rows, over a window that holds
+    both (the stored demo's steady window, about 16.7-25 s)."""
+    import shutil
+
+    from analysis.evidence import report
+    from settler.output import MERGES_BY_HEIGHT, PROFILE_BANDS, write_table
+
+    root = tmp_path / "reference"
+    shutil.copytree("data/reference/demo", root / "demo")
+    z = (np.arange(PROFILE_BANDS) + 0.5) * 0.01
+    rows = []
+    for t, n in ((10.0, 0.0), (25.0, 100.0)):
+        for k, zk in enumerate(z):
+            rows.append({"time": t, "z": zk, "merges_under_inlet": n if k == PROFILE_BANDS - 1 else 0.0,
+                         "merges_elsewhere": n if k == 0 else 0.0})
+    write_table(rows, MERGES_BY_HEIGHT, root / "demo" / "merges_by_height.csv")
+    line = next(x for x in report(root).splitlines() if x.startswith("demo merges"))
+    assert "50 % under the inlet, 50 % in the top tenth of the height, 50 % in the bottom tenth" in line
+    assert "over 10-25 s: 13.33 per s" in line
