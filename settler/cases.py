@@ -198,9 +198,10 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "near_wall": Field(S, "", "The slag velocity a droplet's drag sees next to a wall: 'interior' (interior "
                            "faces only: within a cell of a wall a droplet reads the wall-normal velocity of the faces "
                            "one and two cells out, never the wall's zero; the engine before 2026-12-05, and the only "
-                           "form with kernel = 'direct') or 'wall' (the default: the walls' boundary faces enter the filtered kernel's trilinear weights, so the wall-normal "
-                           "velocity a droplet sees falls linearly to zero at the wall, and the drag reaction's share "
-                           "on them goes to the wall; inlet and outlet faces count as walls; only with kernel = "
+                           "form with kernel = 'direct') or 'wall' (the default: the walls' boundary faces enter "
+                           "the filtered kernel's trilinear weights, so the wall-normal velocity a droplet sees "
+                           "falls linearly to zero at the wall, and the drag reaction's share on them goes to the "
+                           "wall; inlet and outlet faces count as walls; only with kernel = "
                            "'filtered', and droplets wider than sigma_cells cells keep the interior weights).",
                            choices=("interior", "wall")),
         "hindrance": Field(S, "", "Void-fraction correction of the drag.", choices=HINDRANCE.names()),
