@@ -130,6 +130,26 @@ class SetResult:
     files: list[Path] = field(default_factory=list)
 
 
+def chosen_runs(run_set: RunSet, only=None) -> list[SetRun]:
+    """The runs of ``run_set`` named in ``only`` (comma-separated text or a list; all if empty), in file order.
+    Raises CaseError naming the names the set lacks and those it has."""
+    runs = run_set.runs
+    if not only:
+        return runs
+    wanted = [w for w in (only.split(",") if isinstance(only, str) else only) if w]
+    names = {r.name for r in runs}
+    missing = [w for w in wanted if w not in names]
+    if missing:
+        raise CaseError(f"--only {','.join(missing)}: not in {run_set.path}; allowed: {', '.join(sorted(names))}")
+    return [r for r in runs if r.name in wanted]
+
+
+def run_hash(run: SetRun, engine: str) -> str:
+    """The point folder's name of ``run`` with ``engine`` (:func:`analysis.sweep.execution.point_hash`; a full
+    point's droplet list counts)."""
+    return point_hash(run.case, engine, run.droplets if engine == "full" else None)
+
+
 def sweep_set(path, engine: str = "full", out="sweep-set", workers: int | None = None, scheduler: str | None = None,
               only=None, progress: bool = True, command_line: str | None = None, client=None) -> SetResult:
     """Run every run of the set file ``path`` (or those named in ``only``) with ``engine`` and write the table into
@@ -139,17 +159,10 @@ def sweep_set(path, engine: str = "full", out="sweep-set", workers: int | None =
     check_workers(workers)
     check_engine(engine)
     run_set = load_run_set(path)
-    runs = run_set.runs
-    if only:
-        wanted = [w for w in (only.split(",") if isinstance(only, str) else only) if w]
-        names = {r.name for r in runs}
-        missing = [w for w in wanted if w not in names]
-        if missing:
-            raise CaseError(f"--only {','.join(missing)}: not in {path}; allowed: {', '.join(sorted(names))}")
-        runs = [r for r in runs if r.name in wanted]
+    runs = chosen_runs(run_set, only)
     out = prepare_output_folder(out, resume=True)
     points = out / POINTS
-    hashes = [point_hash(r.case, engine, r.droplets if engine == "full" else None) for r in runs]
+    hashes = [run_hash(r, engine) for r in runs]
     records, tasks = {}, {}
     for run, digest in zip(runs, hashes):
         if digest in records or digest in tasks:
@@ -219,18 +232,11 @@ def set_status(path, engine: str = "full", out="sweep-set", only=None, now: floa
     from settler.output import read_time_series
 
     check_engine(engine)
-    runs = load_run_set(path).runs
-    if only:
-        wanted = [w for w in (only.split(",") if isinstance(only, str) else only) if w]
-        names = {r.name for r in runs}
-        missing = [w for w in wanted if w not in names]
-        if missing:
-            raise CaseError(f"--only {','.join(missing)}: not in {path}; allowed: {', '.join(sorted(names))}")
-        runs = [r for r in runs if r.name in wanted]
+    runs = chosen_runs(load_run_set(path), only)
     now = time.time() if now is None else now
     rows = []
     for run in runs:
-        digest = point_hash(run.case, engine, run.droplets if engine == "full" else None)
+        digest = run_hash(run, engine)
         folder = Path(out) / POINTS / digest
         end = float(run.case.fulldem.end_time if engine == "full" else run.case.popbal.end_time)
         row = {"name": run.name, "hash": digest, "state": "not started", "time": math.nan, "end_time": end,
