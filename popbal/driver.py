@@ -128,13 +128,10 @@ class Result:
         merges, z = self.arrays["merges"], self.arrays["z"]
         under = merges[:, ROOF] + merges[:, CHANNEL]
         elsewhere = merges[:, OUTER] + merges[:, BOTTOM]
-        edges = band_edges(self.case.geometry.height)
-        rows = []
-        for n, t in enumerate(self.arrays["time"]):
-            for low, high in zip(edges[:-1], edges[1:]):
-                cells = (z >= low) & (z < high) if high < edges[-1] else (z >= low)
-                rows.append({"time": t, "z": 0.5 * (low + high), "merges_under_inlet": float(under[n, cells].sum()),
-                             "merges_elsewhere": float(elsewhere[n, cells].sum())})
+        bands = _band_cells(z, self.case.geometry.height)
+        rows = [{"time": t, "z": centre, "merges_under_inlet": float(under[n, cells].sum()),
+                 "merges_elsewhere": float(elsewhere[n, cells].sum())}
+                for n, t in enumerate(self.arrays["time"]) for centre, cells in bands]
         return pd.DataFrame(rows, columns=list(MERGES_BY_HEIGHT))
 
     def save(self, out_dir: str | os.PathLike, distribution: bool = True) -> Path:
@@ -263,14 +260,19 @@ def _channel(model: Model, content: np.ndarray, work: _Work, cells: np.ndarray):
 
 def _channel_profile(model: Model, content: np.ndarray, work: _Work, t: float) -> list[dict]:
     """Rows of settler.output.CHANNEL_PROFILE: the channel measures in PROFILE_BANDS height bands."""
-    edges = band_edges(model.case.geometry.height)
     rows = []
-    for low, high in zip(edges[:-1], edges[1:]):
-        cells = np.flatnonzero((model.z >= low) & (model.z < high))
+    for centre, cells in _band_cells(model.z, model.case.geometry.height):
         radius, velocity, volume = _channel(model, content, work, cells)
-        rows.append({"time": t, "z": 0.5 * (low + high), "channel_radius": radius, "channel_velocity": velocity,
+        rows.append({"time": t, "z": centre, "channel_radius": radius, "channel_velocity": velocity,
                      "droplet_volume": volume})
     return rows
+
+
+def _band_cells(z: np.ndarray, height: float) -> list[tuple[float, np.ndarray]]:
+    """(band centre [m], indices of the cells whose centres ``z`` [m] lie in it) for each height band of
+    settler.output.band_edges: the bands of the channel profile and of merges_by_height.csv."""
+    edges = band_edges(height)
+    return [(0.5 * (low + high), np.flatnonzero((z >= low) & (z < high))) for low, high in zip(edges[:-1], edges[1:])]
 
 
 def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: float):
