@@ -21,6 +21,8 @@ droplets, and the collision efficiency of the kernel run (SI units throughout).
   counts can be compared zone by zone rather than as one number.
 * :func:`merge_shares` -- where a run merges over a window: from ``merges_by_height.csv`` (full engine since
   a04ea13, popbal), the merge rate and its shares under the inlet, in the top and the bottom band, band by band.
+* :func:`band_efficiency` -- the collision efficiency of a whole run band by band: its merges over the gravitational
+  collisions its droplets make cell by cell (:mod:`analysis.band_efficiency`), to set beside the kernel run's.
 * :func:`floor_arrivals` -- how a full run's droplets reach the floor: their count, mean vertical velocity against
   their own settling velocity, and arrival rate within a thin layer over the floor, under the plume and away from
   it.
@@ -36,6 +38,7 @@ import pandas as pd
 from settler.derived import settling_velocity
 from settler.output import half_volume_radius
 
+from .band_efficiency import band_efficiency, cell_collision_rates  # noqa: F401
 from .kernel_run import (EXPOSURE_FILE, collision_efficiency, kernel_exposure, kernel_run_efficiency,  # noqa: F401
                          pair_exposure, write_kernel_exposure)
 from .runs import REDUCED_ENGINE, load_run
@@ -321,6 +324,13 @@ def report(root="data/reference") -> str:
         lines.append(f"{name} merges over {m['window'][0]:.0f}-{m['window'][1]:.0f} s: {m['rate']:.4g} per s, "
                      f"{100 * m['under_inlet']:.0f} % under the inlet, {100 * m['top']:.0f} % in the top tenth of "
                      f"the height, {100 * m['bottom']:.0f} % in the bottom tenth")
+        try:  # a stored run keeps few snapshots: the window may hold none
+            e = band_efficiency(run, m["window"])
+        except ValueError:
+            continue
+        lines.append(f"{name} collision efficiency where it merges: E = {e['efficiency']:.3f} +- "
+                     f"{e['standard_error']:.3f} in {1e3 * e['cell']:g} mm cells over {len(e['snapshots'])} "
+                     f"snapshot(s), by band top first " + " ".join(f"{x:.2f}" for x in e["bands"]["efficiency"][::-1]))
     for coarse, fine in RESOLUTION_PAIRS:
         if coarse in runs and fine in runs:
             end = min(summaries[fine]["end_time"], summaries[coarse]["end_time"])
@@ -395,6 +405,19 @@ def _print_merge_shares(prog: str, folders) -> int:
     return _print_per_run(prog, folders, header, merge_shares, lines)
 
 
+def _print_band_efficiency(prog: str, folders, cell) -> int:
+    def lines(name, run, e):
+        held = e["bands"]["held"].to_numpy()
+        return [f"{name:28s} {e['window'][0]:7.4g}-{e['window'][1]:<7.4g} {len(e['snapshots']):5d} "
+                f"{1e3 * e['cell']:6.3g} {e['efficiency']:7.3f} {e['standard_error']:6.3f}   "
+                + " ".join(f"{x:.2f}" for x in e["bands"]["efficiency"][::-1])
+                + "   held " + " ".join(f"{x / held.sum():.2f}" for x in held[::-1])]
+
+    header = (f"{'run':28s} {'window [s]':>15s} {'snaps':>5s} {'cell':>6s} {'E':>7s} {'+-':>6s}   efficiency by "
+              "height band, top first; then the share of the droplets each band holds (cell in mm)")
+    return _print_per_run(prog, folders, header, lambda run: band_efficiency(run, None, cell), lines)
+
+
 def main(argv=None) -> int:
     """``python -m analysis.evidence [ROOT]``: print :func:`report`; ``--height-bands RUN ...``: print
     :func:`height_bands` of each run instead. Exit status 0, 2 for a ROOT that holds no stored reference run or a RUN
@@ -418,6 +441,13 @@ def main(argv=None) -> int:
                         help="instead of the report, print where each RUN folder (a full run since a04ea13, a "
                              "stored reference that has merges_by_height.csv, or a popbal run) merged over its "
                              "steady window (else its last third): merge_shares")
+    parser.add_argument("--efficiency", nargs="+", metavar="RUN",
+                        help="instead of the report, print the collision efficiency of each full RUN folder band by "
+                             "band over its steady window (else its last third): its merges over the gravitational "
+                             "collisions of its droplets cell by cell (band_efficiency; needs merges_by_height.csv and "
+                             "a droplet snapshot in the window)")
+    parser.add_argument("--cell", type=float, default=None,
+                        help="cell edge for --efficiency [m] (default: the run's fulldem.cell_size)")
     parser.add_argument("--layer", type=float, default=FLOOR_LAYER,
                         help=f"thickness of the floor layer for --floor [m] (default {FLOOR_LAYER})")
     parser.add_argument("--time", type=float, default=None, help="output time for --height-bands and --floor [s]")
@@ -430,6 +460,8 @@ def main(argv=None) -> int:
         return _print_floor_arrivals(parser.prog, args.floor, args.time, args.layer)
     if args.merges:
         return _print_merge_shares(parser.prog, args.merges)
+    if args.efficiency:
+        return _print_band_efficiency(parser.prog, args.efficiency, args.cell)
     root = Path(args.root)
     if not root.is_dir() or not any((p / "reference.json").is_file() for p in root.iterdir()):
         print(f"{parser.prog}: error: {root} holds no stored reference run (no <name>/reference.json)",

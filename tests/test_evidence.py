@@ -262,3 +262,26 @@ def test_report_says_where_a_run_with_the_merge_table_merges(tmp_path):
     line = next(x for x in report(root).splitlines() if x.startswith("demo merges"))
     assert "50 % under the inlet, 50 % in the top tenth of the height, 50 % in the bottom tenth" in line
     assert "over 10-25 s: 13.33 per s" in line
+    # the window holds the stored 13 and 25 s snapshots: the efficiency line is band_efficiency's over that window
+    from analysis.evidence import band_efficiency
+    e = band_efficiency(root / "demo", (10.0, 25.0))
+    line = next(x for x in report(root).splitlines() if x.startswith("demo collision efficiency where it merges"))
+    assert f"E = {e['efficiency']:.3f} +- {e['standard_error']:.3f} in 5 mm cells over 2 snapshot(s)" in line
+
+
+def test_efficiency_command_prints_a_row_per_run_and_refuses_a_run_without_the_table(tmp_path, capsys):
+    import shutil
+
+    from analysis.evidence import main
+    from settler.output import MERGES_BY_HEIGHT, PROFILE_BANDS, write_table
+
+    shutil.copytree("data/reference/demo", tmp_path / "demo")
+    z = (np.arange(PROFILE_BANDS) + 0.5) * 0.01
+    rows = [{"time": t, "z": zk, "merges_under_inlet": n, "merges_elsewhere": 0.0}
+            for t, n in ((10.0, 0.0), (25.0, 10.0)) for zk in z]
+    write_table(rows, MERGES_BY_HEIGHT, tmp_path / "demo" / "merges_by_height.csv")
+    assert main(["--efficiency", str(tmp_path / "demo"), "--cell", "0.01"]) == 0
+    row = capsys.readouterr().out.splitlines()[1].split()
+    assert row[0] == "demo" and row[2] == "2" and row[3] == "10" and "held" in row
+    assert main(["--efficiency", "data/reference/demo"]) == 2
+    assert "no merges_by_height.csv" in capsys.readouterr().err

@@ -1,0 +1,115 @@
+"""The collision efficiency of a whole full run, height band by height band: its merges (``merges_by_height.csv``)
+over the gravitational collisions its droplets make cell by cell (SI units). Re-exported by :mod:`analysis.evidence`.
+
+The kernel run (:mod:`analysis.kernel_run`) measures the efficiency in a dilute closed box of two sizes, with the
+concentrations of horizontal slices and the mean velocity of each size. Where the whole runs merge -- a dense layer
+under the lid, a narrow plume -- the concentration varies on the scale of a cell, and what multiplies the kernel
+there is the local n_i n_j. Here the collisions of every snapshot are summed cell by cell over all pairs of droplets
+in a cell of edge ``cell`` (default: the run's own ``fulldem.cell_size``),
+
+    C_cell = sum_{i<j in the cell} pi (a_i + a_j)^2 abs(U_i - U_j) / V_cell   [1/s],
+
+with U the single-droplet terminal velocity of each droplet's diameter and density in the case's slag and drag law
+(:func:`settler.derived.settling_velocity`): the differential-settling kernel popbal applies, with the
+concentrations the full run holds in each cell, as if mixed within it. The sum is exact in O(n log n): the droplets
+of a cell sorted by U, pair j takes U_j (S2 + 2 a_j S1 + a_j^2 S0) - (T2 + 2 a_j T1 + a_j^2 T0) with S_k = sum a_i^k
+and T_k = sum U_i a_i^k over the droplets before it. Each cell counts in the band that holds its centre; the bands
+are those of ``merges_by_height.csv`` (:data:`settler.output.PROFILE_BANDS` equal bands of the height).
+
+The efficiency of a band is its merges between the table's rows nearest the window over the time integral of its
+collision rate, taken as the mean over the snapshots in the window times its length. Standard error: the Poisson
+count of the merges and the standard error of the mean rate over the snapshots, in quadrature (one snapshot: the
+rate's scatter is unknown and only the count's part is given).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from settler.derived import settling_velocity
+from settler.output import PROFILE_BANDS
+
+
+def cell_collision_rates(position, diameter, velocity, cell: float, height: float,
+                         bands: int = PROFILE_BANDS) -> np.ndarray:
+    """Gravitational collisions per second [1/s] in each of ``bands`` equal height bands of a slag of ``height`` [m]:
+    the sum over cubic cells of edge ``cell`` [m] (from the origin) of C_cell (module docstring), each cell in the band
+    of its centre. position (n, 3) [m], diameter (n,) [m], velocity (n,) [m/s] (each droplet's settling velocity)."""
+    position = np.asarray(position, dtype=float)
+    a = 0.5 * np.asarray(diameter, dtype=float)
+    u = np.asarray(velocity, dtype=float)
+    if not (cell > 0.0 and height > 0.0 and bands >= 1):
+        raise ValueError(f"cell = {cell!r} m, height = {height!r} m, bands = {bands!r}: all must be > 0")
+    rates = np.zeros(bands)
+    if len(a) < 2:
+        return rates
+    index = np.floor(position / cell).astype(np.int64)
+    shifted = index - index.min(axis=0)
+    span = shifted.max(axis=0) + 1
+    key = (shifted[:, 2] * span[1] + shifted[:, 1]) * span[0] + shifted[:, 0]
+    order = np.lexsort((u, key))  # by cell, then by U within the cell
+    key, a, u, iz = key[order], a[order], u[order], index[order, 2]
+    first = np.r_[True, key[1:] != key[:-1]]
+    start = np.maximum.accumulate(np.where(first, np.arange(len(key)), 0))
+
+    def before(values):  # the sum over the droplets of the same cell before each one (its exclusive prefix sum)
+        total = np.cumsum(values) - values
+        return total - total[start]
+
+    s0, s1, s2 = before(np.ones_like(a)), before(a), before(a * a)
+    t0, t1, t2 = before(u), before(u * a), before(u * a * a)
+    pair_sum = u * (s2 + 2.0 * a * s1 + a * a * s0) - (t2 + 2.0 * a * t1 + a * a * t0)
+    centre = (iz + 0.5) * cell
+    band = np.clip(np.floor(centre / height * bands).astype(np.int64), 0, bands - 1)
+    np.add.at(rates, band, pair_sum)
+    return math.pi * rates / cell**3
+
+
+def band_efficiency(run, window: tuple[float, float] | None = None, cell: float | None = None) -> dict:
+    """The collision efficiency of ``run`` (a full run folder or stored reference, or an :class:`analysis.Run`)
+    band by band over ``window`` (start, end) [s] (default: its steady window, else its last third), cells of edge
+    ``cell`` [m] (default: the run's ``fulldem.cell_size``). Returns {"window" (the merge table's rows) [s],
+    "snapshots" (their times) [s], "cell" [m], "bands" (a DataFrame: z [m], held (mean droplets) [-], merges [-],
+    collisions [-], efficiency [-]), "efficiency" (all bands) [-], "standard_error" [-]}. Raises ValueError for a
+    run without merges_by_height.csv or without a droplet snapshot inside the window."""
+    from .evidence import merge_shares
+    from .runs import load_run
+
+    run = load_run(run)
+    shares = merge_shares(run, window)
+    t0, t1 = shares["window"]
+    times = [float(t) for t in run.snapshot_times() if t0 <= t <= t1]
+    if not times:
+        raise ValueError(f"{run.folder}: no droplet snapshot within {t0:g}-{t1:g} s (the merge table's rows): "
+                         "a stored reference keeps few snapshots; give the run folder or another window")
+    case = run.case
+    height = float(case.geometry.height)
+    cell = float(case.fulldem.cell_size) if cell is None else float(cell)
+    merges = shares["bands"][["merges_under_inlet", "merges_elsewhere"]].sum(axis=1).to_numpy()
+    bands = len(merges)
+    rates, held = [], []
+    for t in times:
+        _, d = run.droplets(t)
+        position = d[["x", "y", "z"]].to_numpy()
+        u = settling_velocity(case, d["diameter"].to_numpy(), d["density"].to_numpy())
+        rates.append(cell_collision_rates(position, d["diameter"].to_numpy(), u, cell, height, bands))
+        k = np.clip(np.floor(d["z"].to_numpy() / height * bands).astype(np.int64), 0, bands - 1)
+        held.append(np.bincount(k, minlength=bands))
+    rates, held = np.array(rates), np.array(held)
+    duration = t1 - t0
+    collisions = rates.mean(axis=0) * duration
+    total_merges, total_collisions = float(merges.sum()), float(collisions.sum())
+    efficiency = total_merges / total_collisions if total_collisions > 0 else math.nan
+    relative = 1.0 / total_merges if total_merges > 0 else math.inf
+    if len(times) > 1:
+        totals = rates.sum(axis=1)
+        relative += (totals.std(ddof=1) / math.sqrt(len(totals)) / totals.mean()) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_band = np.where(collisions > 0, merges / collisions, np.nan)
+    table = pd.DataFrame({"z": shares["bands"]["z"].to_numpy(), "held": held.mean(axis=0), "merges": merges,
+                          "collisions": collisions, "efficiency": per_band})
+    return {"window": (t0, t1), "snapshots": times, "cell": cell, "bands": table, "efficiency": efficiency,
+            "standard_error": efficiency * math.sqrt(relative)}
