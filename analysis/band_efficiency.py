@@ -16,6 +16,12 @@ of a cell sorted by U, pair j takes U_j (S2 + 2 a_j S1 + a_j^2 S0) - (T2 + 2 a_j
 and T_k = sum U_i a_i^k over the droplets before it. Each cell counts in the band that holds its centre; the bands
 are those of ``merges_by_height.csv`` (:data:`settler.output.PROFILE_BANDS` equal bands of the height).
 
+The same merges over the collisions of droplets *well mixed* in each band's two regions -- under the inlet (its disk
+or slot extended down, where ``merges_by_height.csv`` books a merge "under the inlet") and elsewhere -- give the
+efficiency a model with those zones would need there (:func:`region_collision_rates`: the same pair sum over the
+region, over the region's volume). Against the cell-by-cell efficiency it measures how much the droplets cluster
+within the region.
+
 The efficiency of a band is its merges between the table's rows nearest the window over the time integral of its
 collision rate, taken as the mean over the snapshots in the window times its length. Standard error: the Poisson
 count of the merges and the standard error of the mean rate over the snapshots, in quadrature (one snapshot: the
@@ -33,39 +39,65 @@ from settler.derived import settling_velocity
 from settler.output import PROFILE_BANDS
 
 
+def pair_sums(group, diameter, velocity) -> tuple[np.ndarray, np.ndarray]:
+    """(the distinct values of ``group`` (n,) [int], for each the sum over the pairs of its droplets of
+    (a_i + a_j)^2 abs(U_i - U_j) [m^3/s]), a = diameter / 2 [m], U = ``velocity`` [m/s]; exact, by sorted prefix sums
+    (module docstring)."""
+    group = np.asarray(group, dtype=np.int64)
+    a = 0.5 * np.asarray(diameter, dtype=float)
+    u = np.asarray(velocity, dtype=float)
+    if len(a) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    order = np.lexsort((u, group))  # by group, then by U within the group
+    group, a, u = group[order], a[order], u[order]
+    first = np.r_[True, group[1:] != group[:-1]]
+    start = np.maximum.accumulate(np.where(first, np.arange(len(group)), 0))
+
+    def before(values):  # the sum over the droplets of the same group before each one (its exclusive prefix sum)
+        total = np.cumsum(values) - values
+        return total - total[start]
+
+    s0, s1, s2 = before(np.ones_like(a)), before(a), before(a * a)
+    t0, t1, t2 = before(u), before(u * a), before(u * a * a)
+    per_droplet = u * (s2 + 2.0 * a * s1 + a * a * s0) - (t2 + 2.0 * a * t1 + a * a * t0)
+    index = np.cumsum(first) - 1
+    return group[first], np.bincount(index, per_droplet, minlength=int(first.sum()))
+
+
 def cell_collision_rates(position, diameter, velocity, cell: float, height: float,
                          bands: int = PROFILE_BANDS) -> np.ndarray:
     """Gravitational collisions per second [1/s] in each of ``bands`` equal height bands of a slag of ``height`` [m]:
     the sum over cubic cells of edge ``cell`` [m] (from the origin) of C_cell (module docstring), each cell in the band
     of its centre. position (n, 3) [m], diameter (n,) [m], velocity (n,) [m/s] (each droplet's settling velocity)."""
     position = np.asarray(position, dtype=float)
-    a = 0.5 * np.asarray(diameter, dtype=float)
-    u = np.asarray(velocity, dtype=float)
     if not (cell > 0.0 and height > 0.0 and bands >= 1):
         raise ValueError(f"cell = {cell!r} m, height = {height!r} m, bands = {bands!r}: all must be > 0")
     rates = np.zeros(bands)
-    if len(a) < 2:
+    if len(position) < 2:
         return rates
     index = np.floor(position / cell).astype(np.int64)
     shifted = index - index.min(axis=0)
     span = shifted.max(axis=0) + 1
     key = (shifted[:, 2] * span[1] + shifted[:, 1]) * span[0] + shifted[:, 0]
-    order = np.lexsort((u, key))  # by cell, then by U within the cell
-    key, a, u, iz = key[order], a[order], u[order], index[order, 2]
-    first = np.r_[True, key[1:] != key[:-1]]
-    start = np.maximum.accumulate(np.where(first, np.arange(len(key)), 0))
-
-    def before(values):  # the sum over the droplets of the same cell before each one (its exclusive prefix sum)
-        total = np.cumsum(values) - values
-        return total - total[start]
-
-    s0, s1, s2 = before(np.ones_like(a)), before(a), before(a * a)
-    t0, t1, t2 = before(u), before(u * a), before(u * a * a)
-    pair_sum = u * (s2 + 2.0 * a * s1 + a * a * s0) - (t2 + 2.0 * a * t1 + a * a * t0)
-    centre = (iz + 0.5) * cell
-    band = np.clip(np.floor(centre / height * bands).astype(np.int64), 0, bands - 1)
-    np.add.at(rates, band, pair_sum)
+    keys, sums = pair_sums(key, diameter, velocity)
+    iz = keys // (span[0] * span[1]) + index[:, 2].min()
+    band = np.clip(np.floor((iz + 0.5) * cell / height * bands).astype(np.int64), 0, bands - 1)
+    np.add.at(rates, band, sums)
     return math.pi * rates / cell**3
+
+
+def region_collision_rates(band, under_inlet, diameter, velocity, volumes) -> np.ndarray:
+    """Gravitational collisions per second [1/s] of droplets well mixed in each height band's two regions, under the
+    inlet and elsewhere (popbal's zones seen as well mixed): (bands, 2) = pi sum over the region's pairs of
+    (a_i + a_j)^2 abs(U_i - U_j) / V_region. band (n,) [int], under_inlet (n,) [bool], diameter [m], velocity [m/s],
+    volumes (bands, 2) [m^3] of the regions."""
+    volumes = np.asarray(volumes, dtype=float)
+    rates = np.zeros(volumes.shape)
+    key = 2 * np.asarray(band, dtype=np.int64) + np.where(under_inlet, 0, 1)
+    keys, sums = pair_sums(key, diameter, velocity)
+    flat = rates.reshape(-1)
+    flat[keys] = math.pi * sums / volumes.reshape(-1)[keys]
+    return rates
 
 
 def band_efficiency(run, window: tuple[float, float] | None = None, cell: float | None = None) -> dict:
@@ -73,8 +105,11 @@ def band_efficiency(run, window: tuple[float, float] | None = None, cell: float 
     band by band over ``window`` (start, end) [s] (default: its steady window, else its last third), cells of edge
     ``cell`` [m] (default: the run's ``fulldem.cell_size``). Returns {"window" (the merge table's rows) [s],
     "snapshots" (their times) [s], "cell" [m], "bands" (a DataFrame: z [m], held (mean droplets) [-], merges [-],
-    collisions [-], efficiency [-]), "efficiency" (all bands) [-], "standard_error" [-]}. Raises ValueError for a
-    run without merges_by_height.csv or without a droplet snapshot inside the window."""
+    collisions [-], efficiency [-], and the same with each band's two regions well mixed (module docstring):
+    collisions_under_inlet, collisions_elsewhere, efficiency_under_inlet, efficiency_elsewhere [-]), "efficiency"
+    (all bands, cell by cell) [-], "standard_error" [-], "mixed" ({"under_inlet", "elsewhere"}: all bands' merges in
+    the region over its well-mixed collisions) [-]}. Raises ValueError for a run without merges_by_height.csv or
+    without a droplet snapshot inside the window."""
     from .evidence import merge_shares
     from .runs import load_run
 
@@ -88,19 +123,29 @@ def band_efficiency(run, window: tuple[float, float] | None = None, cell: float 
     case = run.case
     height = float(case.geometry.height)
     cell = float(case.fulldem.cell_size) if cell is None else float(cell)
-    merges = shares["bands"][["merges_under_inlet", "merges_elsewhere"]].sum(axis=1).to_numpy()
+    from fulldem.boundaries import Inlet
+
+    places = shares["bands"][["merges_under_inlet", "merges_elsewhere"]].to_numpy()
+    merges = places.sum(axis=1)
     bands = len(merges)
-    rates, held = [], []
+    g = case.geometry
+    inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, height, g.inlet_length or 0.0)
+    volumes = np.outer(np.full(bands, height / bands), [inlet.area, g.width * g.depth - inlet.area])
+    rates, regional, held = [], [], []
     for t in times:
         _, d = run.droplets(t)
         position = d[["x", "y", "z"]].to_numpy()
-        u = settling_velocity(case, d["diameter"].to_numpy(), d["density"].to_numpy())
-        rates.append(cell_collision_rates(position, d["diameter"].to_numpy(), u, cell, height, bands))
-        k = np.clip(np.floor(d["z"].to_numpy() / height * bands).astype(np.int64), 0, bands - 1)
+        diameter = d["diameter"].to_numpy()
+        u = settling_velocity(case, diameter, d["density"].to_numpy())
+        rates.append(cell_collision_rates(position, diameter, u, cell, height, bands))
+        k = np.clip(np.floor(position[:, 2] / height * bands).astype(np.int64), 0, bands - 1)
+        regional.append(region_collision_rates(k, inlet.contains(position[:, 0], position[:, 1]), diameter, u,
+                                               volumes))
         held.append(np.bincount(k, minlength=bands))
     rates, held = np.array(rates), np.array(held)
     duration = t1 - t0
     collisions = rates.mean(axis=0) * duration
+    region_collisions = np.mean(regional, axis=0) * duration
     total_merges, total_collisions = float(merges.sum()), float(collisions.sum())
     efficiency = total_merges / total_collisions if total_collisions > 0 else math.nan
     relative = 1.0 / total_merges if total_merges > 0 else math.inf
@@ -109,7 +154,14 @@ def band_efficiency(run, window: tuple[float, float] | None = None, cell: float 
         relative += (totals.std(ddof=1) / math.sqrt(len(totals)) / totals.mean()) ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         per_band = np.where(collisions > 0, merges / collisions, np.nan)
+        per_region = np.where(region_collisions > 0, places / region_collisions, np.nan)
     table = pd.DataFrame({"z": shares["bands"]["z"].to_numpy(), "held": held.mean(axis=0), "merges": merges,
-                          "collisions": collisions, "efficiency": per_band})
+                          "collisions": collisions, "efficiency": per_band,
+                          "collisions_under_inlet": region_collisions[:, 0],
+                          "collisions_elsewhere": region_collisions[:, 1],
+                          "efficiency_under_inlet": per_region[:, 0], "efficiency_elsewhere": per_region[:, 1]})
+    totals = region_collisions.sum(axis=0)
+    mixed = {place: (float(places[:, i].sum() / totals[i]) if totals[i] > 0 else math.nan)
+             for i, place in enumerate(("under_inlet", "elsewhere"))}
     return {"window": (t0, t1), "snapshots": times, "cell": cell, "bands": table, "efficiency": efficiency,
-            "standard_error": efficiency * math.sqrt(relative)}
+            "standard_error": efficiency * math.sqrt(relative), "mixed": mixed}

@@ -409,12 +409,14 @@ def _print_band_efficiency(prog: str, folders, cell) -> int:
     def lines(name, run, e):
         held = e["bands"]["held"].to_numpy()
         return [f"{name:28s} {e['window'][0]:7.4g}-{e['window'][1]:<7.4g} {len(e['snapshots']):5d} "
-                f"{1e3 * e['cell']:6.3g} {e['efficiency']:7.3f} {e['standard_error']:6.3f}   "
+                f"{1e3 * e['cell']:6.3g} {e['efficiency']:7.3f} {e['standard_error']:6.3f} "
+                f"{e['mixed']['under_inlet']:7.3f} {e['mixed']['elsewhere']:7.3f}   "
                 + " ".join(f"{x:.2f}" for x in e["bands"]["efficiency"][::-1])
                 + "   held " + " ".join(f"{x / held.sum():.2f}" for x in held[::-1])]
 
-    header = (f"{'run':28s} {'window [s]':>15s} {'snaps':>5s} {'cell':>6s} {'E':>7s} {'+-':>6s}   efficiency by "
-              "height band, top first; then the share of the droplets each band holds (cell in mm)")
+    header = (f"{'run':28s} {'window [s]':>15s} {'snaps':>5s} {'cell':>6s} {'E':>7s} {'+-':>6s} {'E_inlet':>7s} "
+              f"{'E_else':>7s}   efficiency by height band (cell by cell), top first; then the share of the droplets "
+              "each band holds (cell in mm; E_inlet, E_else: with each band under the inlet and elsewhere well mixed)")
     return _print_per_run(prog, folders, header, lambda run: band_efficiency(run, None, cell), lines)
 
 

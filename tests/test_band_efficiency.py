@@ -82,8 +82,33 @@ def test_a_runs_efficiency_is_its_merges_over_the_collisions_of_its_snapshot(tmp
     assert result["efficiency"] == pytest.approx(150.0 / (rates.sum() * 5.0), rel=1e-12)
     assert result["standard_error"] == pytest.approx(result["efficiency"] / math.sqrt(150.0), rel=1e-12)
     assert bands["held"].sum() == len(d)
+    # well mixed by region: the top band's merges were all under the inlet, the bottom band's all elsewhere
+    assert result["mixed"]["under_inlet"] == pytest.approx(120.0 / bands["collisions_under_inlet"].sum(), rel=1e-12)
+    assert result["mixed"]["elsewhere"] == pytest.approx(30.0 / bands["collisions_elsewhere"].sum(), rel=1e-12)
+    assert bands["efficiency_under_inlet"].iloc[0] == 0.0  # droplets there, no merges
+    top_elsewhere = bands["collisions_elsewhere"].iloc[-1]  # the demo's top band holds droplets under the inlet only
+    assert (top_elsewhere == 0.0 and math.isnan(bands["efficiency_elsewhere"].iloc[-1])) or \
+        bands["efficiency_elsewhere"].iloc[-1] == 0.0
     for row in rows:  # the same merges a second earlier: the window 20-21 s holds no snapshot
         row["time"] = 21.0 if row["time"] == 25.0 else row["time"]
     write_table(rows, MERGES_BY_HEIGHT, folder / "merges_by_height.csv")
     with pytest.raises(ValueError, match="no droplet snapshot within 20-21 s"):
         band_efficiency(folder, (20.0, 21.0))
+
+
+def test_well_mixed_regions_give_the_uniform_suspension_kernel():
+    """Two sizes in one band's two regions: the region rate is pi (a_s + a_l)^2 abs(dU) N_s N_l / V_region whatever
+    the droplets' places inside it (the pair sum of a well-mixed zone), equal sizes add nothing, and a band's
+    regions do not see each other's droplets."""
+    from analysis.band_efficiency import region_collision_rates
+
+    d = np.array([0.5e-3] * 3 + [1.0e-3] * 2 + [0.5e-3] * 4)
+    u = np.where(d < 0.7e-3, 0.6e-3, 2.4e-3)
+    band = np.array([1, 1, 1, 1, 0, 0, 0, 0, 0])  # band 1 under the inlet: 3 small, 1 large; band 0 elsewhere: 1, 4
+    under = np.array([True] * 4 + [False] * 5)
+    volumes = np.array([[2e-6, 6e-6], [2e-6, 6e-6]])
+    rates = region_collision_rates(band, under, d, u, volumes)
+    expected = math.pi * (0.75e-3) ** 2 * 1.8e-3 * 3 * 1 / 2e-6
+    assert rates[1, 0] == pytest.approx(expected, rel=1e-12)
+    assert rates[0, 1] == pytest.approx(math.pi * (0.75e-3) ** 2 * 1.8e-3 * 4 / 6e-6, rel=1e-12)
+    assert rates[1, 1] == 0.0 and rates[0, 0] == 0.0
