@@ -405,6 +405,15 @@ def _print_merge_shares(prog: str, folders) -> int:
     return _print_per_run(prog, folders, header, merge_shares, lines)
 
 
+def _kernel_lines(fit) -> list[str]:
+    if fit is None:
+        return ["    (no whole slag grid in the window: the shear kernel is not measured)"]
+    se = fit["standard_errors"]
+    return [f"    merges = E_g C_g + E_s C_s over {fit['regions']} band regions: E_g = {fit['gravitational']:.3f} +- "
+            f"{se[0]:.3f}, E_s = {fit['shear']:.3f} +- {se[1]:.3f}, correlation {fit['correlation']:.2f}, reduced "
+            f"chi2 {fit['chi2_reduced']:.3g}; shear / gravitational collisions {fit['shear_over_gravitational']:.3f}"]
+
+
 def _print_band_efficiency(prog: str, folders, cell) -> int:
     def lines(name, run, e):
         held = e["bands"]["held"].to_numpy()
@@ -412,7 +421,7 @@ def _print_band_efficiency(prog: str, folders, cell) -> int:
                 f"{1e3 * e['cell']:6.3g} {e['efficiency']:7.3f} {e['standard_error']:6.3f} "
                 f"{e['mixed']['under_inlet']:7.3f} {e['mixed']['elsewhere']:7.3f}   "
                 + " ".join(f"{x:.2f}" for x in e["bands"]["efficiency"][::-1])
-                + "   held " + " ".join(f"{x / held.sum():.2f}" for x in held[::-1])]
+                + "   held " + " ".join(f"{x / held.sum():.2f}" for x in held[::-1])] + _kernel_lines(e["kernels"])
 
     header = (f"{'run':28s} {'window [s]':>15s} {'snaps':>5s} {'cell':>6s} {'E':>7s} {'+-':>6s} {'E_inlet':>7s} "
               f"{'E_else':>7s}   efficiency by height band (cell by cell), top first; then the share of the droplets "
