@@ -39,6 +39,7 @@ rate's scatter is unknown and only the count's part is given).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -143,7 +144,8 @@ def kernel_fit(merges, gravitational, shear) -> dict:
     the gravitational and shear collisions [-] of each), weighted least squares with Poisson weights 1 / max(merges,
     1); the standard errors from the weighted normal matrix, scaled by the reduced chi-square where it exceeds 1
     (scatter beyond the count's). Returns {"gravitational", "shear" (the efficiencies) [-], "standard_errors" (2,),
-    "correlation" [-], "chi2_reduced" [-], "regions" (used: those with collisions) [-]}."""
+    "correlation" [-], "chi2_reduced" [-], "regions" (used: those with collisions) [-]}, NaN where fewer than two
+    regions have collisions or the two kernels are proportional over them (nothing tells them apart)."""
     y = np.asarray(merges, dtype=float).reshape(-1)
     x = np.column_stack([np.asarray(gravitational, dtype=float).reshape(-1),
                          np.asarray(shear, dtype=float).reshape(-1)])
@@ -151,6 +153,10 @@ def kernel_fit(merges, gravitational, shear) -> dict:
     y, x = y[used], x[used]
     w = 1.0 / np.maximum(y, 1.0)
     normal = x.T @ (x * w[:, None])
+    if len(y) < 2 or np.linalg.cond(normal) > 1e12:  # too few regions, or the two kernels proportional
+        nan = math.nan
+        return {"gravitational": nan, "shear": nan, "standard_errors": np.array([nan, nan]), "correlation": nan,
+                "chi2_reduced": nan, "regions": int(used.sum())}
     covariance = np.linalg.inv(normal)
     coef = covariance @ (x.T @ (w * y))
     dof = max(len(y) - 2, 1)
@@ -161,20 +167,37 @@ def kernel_fit(merges, gravitational, shear) -> dict:
             "correlation": float(covariance[0, 1] / (se[0] * se[1])), "chi2_reduced": chi2, "regions": int(used.sum())}
 
 
-def band_efficiency(run, window: tuple[float, float] | None = None, cell: float | None = None,
-                    shear: bool = True) -> dict:
-    """The collision efficiency of ``run`` (a full run folder or stored reference, or an :class:`analysis.Run`)
-    band by band over ``window`` (start, end) [s] (default: its steady window, else its last third), cells of edge
-    ``cell`` [m] (default: the run's ``fulldem.cell_size``). Returns {"window" (the merge table's rows) [s],
-    "snapshots" (their times) [s], "cell" [m], "bands" (a DataFrame: z [m], held (mean droplets) [-], merges [-],
-    collisions [-], efficiency [-], and the same with each band's two regions well mixed (module docstring):
-    collisions_under_inlet, collisions_elsewhere, efficiency_under_inlet, efficiency_elsewhere [-]), "efficiency"
-    (all bands, cell by cell) [-], "standard_error" [-], "mixed" ({"under_inlet", "elsewhere"}: all bands' merges in
-    the region over its well-mixed collisions) [-], "kernels" (with ``shear`` and the run's whole slag grid at every
-    snapshot: :func:`kernel_fit` of the bands' merges by region on their cell-by-cell gravitational and shear
-    collisions, plus "shear_over_gravitational", the ratio of the two collision totals; else None)}; the table then
-    also holds shear_under_inlet and shear_elsewhere, the shear collisions [-]. Raises ValueError for a run without
-    merges_by_height.csv or without a droplet snapshot inside the window."""
+#: The measured table of a run, stored beside a reference (which keeps too few snapshots and one slag plane to measure
+#: it again): per height band, the droplets held, the merges and the collisions of every kind over the window
+#: recorded in the header.
+COLLISIONS_FILE = "collisions_by_height.csv"
+COLLISIONS_UNITS = {
+    "z": ("m", "height of the band's centre above the bottom"),
+    "held": ("-", "mean droplets in the band over the window's snapshots"),
+    "merges_under_inlet": ("-", "merges in the band under the inlet over the window"),
+    "merges_elsewhere": ("-", "merges in the band elsewhere over the window"),
+    "collisions": ("-", "gravitational collisions cell by cell over the window"),
+    "mixed_under_inlet": ("-", "gravitational collisions of the band's droplets under the inlet well mixed"),
+    "mixed_elsewhere": ("-", "gravitational collisions of the band's droplets elsewhere well mixed"),
+    "gravitational_under_inlet": ("-", "gravitational collisions cell by cell on the slag grid, under the inlet"),
+    "gravitational_elsewhere": ("-", "gravitational collisions cell by cell on the slag grid, elsewhere"),
+    "shear_under_inlet": ("-", "shear collisions cell by cell with the slag's shear rate, under the inlet (NaN: no "
+                          "whole slag grid)"),
+    "shear_elsewhere": ("-", "shear collisions cell by cell with the slag's shear rate, elsewhere (NaN: no whole "
+                        "slag grid)"),
+}
+
+
+def measure_collisions(run, window: tuple[float, float] | None = None, cell: float | None = None,
+                       shear: bool = True) -> tuple[pd.DataFrame, dict]:
+    """(the :data:`COLLISIONS_UNITS` table of ``run`` (a full run folder, a stored reference or an
+    :class:`analysis.Run`) over ``window`` (start, end) [s] (default: its steady window, else its last third), cells
+    of edge ``cell`` [m] (default: the run's ``fulldem.cell_size``), the shear columns NaN without ``shear`` or
+    without the whole slag grid at every snapshot; {"window" (the merge table's rows) [s], "snapshots" (times) [s],
+    "cell" [m], "rate_scatter" (the relative standard error of the mean collision rate over the snapshots, NaN for
+    one)}). Raises ValueError for a run without merges_by_height.csv or without a droplet snapshot in the window."""
+    from fulldem.boundaries import Inlet
+
     from .evidence import merge_shares
     from .runs import load_run
 
@@ -185,18 +208,14 @@ def band_efficiency(run, window: tuple[float, float] | None = None, cell: float 
     if not times:
         raise ValueError(f"{run.folder}: no droplet snapshot within {t0:g}-{t1:g} s (the merge table's rows): "
                          "a stored reference keeps few snapshots; give the run folder or another window")
-    case = run.case
-    height = float(case.geometry.height)
+    case, g = run.case, run.case.geometry
+    height = float(g.height)
     cell = float(case.fulldem.cell_size) if cell is None else float(cell)
-    from fulldem.boundaries import Inlet
-
     places = shares["bands"][["merges_under_inlet", "merges_elsewhere"]].to_numpy()
-    merges = places.sum(axis=1)
-    bands = len(merges)
-    g = case.geometry
+    bands = len(places)
     inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, height, g.inlet_length or 0.0)
     volumes = np.outer(np.full(bands, height / bands), [inlet.area, g.width * g.depth - inlet.area])
-    rates, regional, held, kernels = [], [], [], []
+    rates, mixed, held, kernels = [], [], [], []
     for t in times:
         _, d = run.droplets(t)
         position = d[["x", "y", "z"]].to_numpy()
@@ -204,44 +223,105 @@ def band_efficiency(run, window: tuple[float, float] | None = None, cell: float 
         u = settling_velocity(case, diameter, d["density"].to_numpy())
         rates.append(cell_collision_rates(position, diameter, u, cell, height, bands))
         k = np.clip(np.floor(position[:, 2] / height * bands).astype(np.int64), 0, bands - 1)
-        regional.append(region_collision_rates(k, inlet.contains(position[:, 0], position[:, 1]), diameter, u,
-                                               volumes))
+        mixed.append(region_collision_rates(k, inlet.contains(position[:, 0], position[:, 1]), diameter, u, volumes))
         held.append(np.bincount(k, minlength=bands))
-        if shear:
-            kernels.append(_region_kernels(run, t, position, diameter, u, k, inlet, bands))
-    shear = shear and all(x is not None for x in kernels)
-    rates, held = np.array(rates), np.array(held)
+        kernels.append(_region_kernels(run, t, position, diameter, u, inlet, bands) if shear else None)
     duration = t1 - t0
-    collisions = rates.mean(axis=0) * duration
-    region_collisions = np.mean(regional, axis=0) * duration
-    total_merges, total_collisions = float(merges.sum()), float(collisions.sum())
+    rates = np.array(rates)
+    totals = rates.sum(axis=1)
+    scatter = float(totals.std(ddof=1) / math.sqrt(len(totals)) / totals.mean()) if len(totals) > 1 else math.nan
+    mixed = np.mean(mixed, axis=0) * duration
+    if all(x is not None for x in kernels):
+        gravitational, shearing = (np.mean([x[i] for x in kernels], axis=0) * duration for i in (0, 1))
+    else:
+        gravitational = shearing = np.full((bands, 2), np.nan)
+    table = pd.DataFrame({"z": shares["bands"]["z"].to_numpy(), "held": np.mean(held, axis=0),
+                          "merges_under_inlet": places[:, 0], "merges_elsewhere": places[:, 1],
+                          "collisions": rates.mean(axis=0) * duration,
+                          "mixed_under_inlet": mixed[:, 0], "mixed_elsewhere": mixed[:, 1],
+                          "gravitational_under_inlet": gravitational[:, 0],
+                          "gravitational_elsewhere": gravitational[:, 1],
+                          "shear_under_inlet": shearing[:, 0], "shear_elsewhere": shearing[:, 1]})
+    return table, {"window": (t0, t1), "snapshots": times, "cell": cell, "rate_scatter": scatter}
+
+
+def efficiencies(table: pd.DataFrame, meta: dict) -> dict:
+    """What a :func:`measure_collisions` table says: {"window", "snapshots", "cell" (from ``meta``), "bands" (the
+    table with efficiency [-] cell by cell, efficiency_under_inlet and efficiency_elsewhere [-] well mixed, per
+    band), "efficiency" (all bands, cell by cell) [-], "standard_error" [-] (the merges' Poisson count and the
+    rate's scatter over the snapshots, in quadrature), "mixed" ({"under_inlet", "elsewhere"}: all bands' merges in
+    the region over its well-mixed collisions) [-], "kernels" (:func:`kernel_fit` of the band regions' merges on
+    their gravitational and shear collisions, plus "shear_over_gravitational", the ratio of the collision totals;
+    None without the shear columns)}."""
+    bands = table.copy()
+    places = bands[["merges_under_inlet", "merges_elsewhere"]].to_numpy()
+    merges = places.sum(axis=1)
+    mixed = bands[["mixed_under_inlet", "mixed_elsewhere"]].to_numpy()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bands["efficiency"] = np.where(bands["collisions"] > 0, merges / bands["collisions"], np.nan)
+        per_region = np.where(mixed > 0, places / mixed, np.nan)
+    bands["efficiency_under_inlet"], bands["efficiency_elsewhere"] = per_region[:, 0], per_region[:, 1]
+    total_merges, total_collisions = float(merges.sum()), float(bands["collisions"].sum())
     efficiency = total_merges / total_collisions if total_collisions > 0 else math.nan
     relative = 1.0 / total_merges if total_merges > 0 else math.inf
-    if len(times) > 1:
-        totals = rates.sum(axis=1)
-        relative += (totals.std(ddof=1) / math.sqrt(len(totals)) / totals.mean()) ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        per_band = np.where(collisions > 0, merges / collisions, np.nan)
-        per_region = np.where(region_collisions > 0, places / region_collisions, np.nan)
-    table = pd.DataFrame({"z": shares["bands"]["z"].to_numpy(), "held": held.mean(axis=0), "merges": merges,
-                          "collisions": collisions, "efficiency": per_band,
-                          "collisions_under_inlet": region_collisions[:, 0],
-                          "collisions_elsewhere": region_collisions[:, 1],
-                          "efficiency_under_inlet": per_region[:, 0], "efficiency_elsewhere": per_region[:, 1]})
-    totals = region_collisions.sum(axis=0)
-    mixed = {place: (float(places[:, i].sum() / totals[i]) if totals[i] > 0 else math.nan)
-             for i, place in enumerate(("under_inlet", "elsewhere"))}
+    if math.isfinite(meta.get("rate_scatter", math.nan)):
+        relative += meta["rate_scatter"] ** 2
+    region_totals = mixed.sum(axis=0)
+    mixed_efficiency = {place: (float(places[:, i].sum() / region_totals[i]) if region_totals[i] > 0 else math.nan)
+                        for i, place in enumerate(("under_inlet", "elsewhere"))}
+    shearing = bands[["shear_under_inlet", "shear_elsewhere"]].to_numpy()
     fit = None
-    if shear:
-        gravitational, shearing = (np.mean([x[i] for x in kernels], axis=0) * duration for i in (0, 1))
-        table["shear_under_inlet"], table["shear_elsewhere"] = shearing[:, 0], shearing[:, 1]
+    if np.isfinite(shearing).all():
+        gravitational = bands[["gravitational_under_inlet", "gravitational_elsewhere"]].to_numpy()
         fit = kernel_fit(places, gravitational, shearing)
         fit["shear_over_gravitational"] = float(shearing.sum() / gravitational.sum())
-    return {"window": (t0, t1), "snapshots": times, "cell": cell, "bands": table, "efficiency": efficiency,
-            "standard_error": efficiency * math.sqrt(relative), "mixed": mixed, "kernels": fit}
+    return {"window": tuple(meta["window"]), "snapshots": list(meta["snapshots"]), "cell": meta["cell"],
+            "bands": bands, "efficiency": efficiency, "standard_error": efficiency * math.sqrt(relative),
+            "mixed": mixed_efficiency, "kernels": fit}
 
 
-def _region_kernels(run, time, position, diameter, velocity, band, inlet, bands):
+def band_efficiency(run, window: tuple[float, float] | None = None, cell: float | None = None,
+                    shear: bool = True) -> dict:
+    """The collision efficiency of ``run`` (a full run folder or stored reference, or an :class:`analysis.Run`)
+    band by band: :func:`efficiencies` of :func:`measure_collisions` (same arguments), or, for a stored reference
+    that keeps a :data:`COLLISIONS_FILE` and no ``window`` or ``cell`` is asked for, of that file (measured on the
+    whole run folder when it was stored)."""
+    from .runs import load_run
+
+    run = load_run(run)
+    stored = run.folder / COLLISIONS_FILE
+    if run.is_reference and stored.is_file() and window is None and cell is None:
+        return efficiencies(*read_collisions(stored))
+    return efficiencies(*measure_collisions(run, window, cell, shear))
+
+
+def write_collisions(run_folder, dest) -> Path:
+    """Measure the run folder ``run_folder`` (:func:`measure_collisions` over its steady window or last third) and
+    write :data:`COLLISIONS_FILE` into the folder ``dest`` (atomically), the window, snapshots, cell and the rate's
+    scatter in its header."""
+    from settler.output import atomic_write_text, units_line
+
+    table, meta = measure_collisions(run_folder)
+    header = (units_line(COLLISIONS_UNITS) + f"# window: {meta['window'][0]!r} {meta['window'][1]!r} s; cell: "
+              f"{meta['cell']!r} m; rate_scatter: {meta['rate_scatter']!r}; snapshots: "
+              + " ".join(repr(t) for t in meta["snapshots"]) + "\n")
+    path = Path(dest) / COLLISIONS_FILE
+    atomic_write_text(path, header + table.to_csv(index=False, float_format="%.9g"))
+    return path
+
+
+def read_collisions(path) -> tuple[pd.DataFrame, dict]:
+    """The (table, meta) a :func:`write_collisions` file holds."""
+    lines = Path(path).read_text().splitlines()
+    head = next(line for line in lines[:3] if line.startswith("# window:"))
+    fields = dict(part.strip().split(": ", 1) for part in head[2:].split(";"))
+    window = tuple(float(x) for x in fields["window"].split()[:2])
+    meta = {"window": window, "cell": float(fields["cell"].split()[0]), "rate_scatter": float(fields["rate_scatter"]),
+            "snapshots": [float(x) for x in fields["snapshots"].split()]}
+    return pd.read_csv(path, comment="#"), meta
+
+
+def _region_kernels(run, time, position, diameter, velocity, inlet, bands):
     """(gravitational, shear) collisions per second [1/s], (bands, 2) under the inlet and elsewhere, summed cell by
     cell on the slag grid of the snapshot at ``time`` with its own shear rates; None where the snapshot's slag is
     not a whole grid (a stored reference)."""

@@ -537,7 +537,9 @@ def available_references(root="data/reference") -> list[str]:
 def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only=None) -> dict[str, Path | str]:
     """Store every finished run of a run-set sweep of the full engine (``settler sweep --set SET_FILE --engine full
     --out SWEEP_OUT``; finished runs only, so this may run while the sweep goes on) as ``dest_root/<run name>/``,
-    its command the one that regenerates it alone (``settler sweep --set SET_FILE --engine full --only NAME``).
+    its command the one that regenerates it alone (``settler sweep --set SET_FILE --engine full --only NAME``),
+    with the kernel runs' exposure (:mod:`analysis.kernel_run`) and, for runs with coalescence and a merge table,
+    their collisions by height (:data:`analysis.band_efficiency.COLLISIONS_FILE`), measured on the run folder.
     Returns name -> the stored folder, or -> why it was not stored (not finished)."""
     from analysis.sweep.execution import DONE_FILE, POINTS, point_hash
     from analysis.sweep.runset import load_run_set
@@ -560,6 +562,15 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
 
             sizes = fed_sizes(run.droplets) if run.droplets else (0.5e-3, 1.0e-3)
             write_kernel_exposure(folder, results[run.name], *sizes)
+        if run.case.coalescence.enabled and (folder / "merges_by_height.csv").is_file():
+            # the collisions by height need every snapshot in the window and the whole slag grid, which the
+            # reference does not keep (analysis.band_efficiency); a run without a snapshot there goes without
+            from analysis.band_efficiency import write_collisions
+
+            try:
+                write_collisions(folder, results[run.name])
+            except ValueError:
+                pass
     return results
 
 

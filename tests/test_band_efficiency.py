@@ -6,6 +6,7 @@ import math
 import shutil
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from analysis.band_efficiency import band_efficiency, cell_collision_rates
@@ -84,10 +85,10 @@ def test_a_runs_efficiency_is_its_merges_over_the_collisions_of_its_snapshot(tmp
     assert result["standard_error"] == pytest.approx(result["efficiency"] / math.sqrt(150.0), rel=1e-12)
     assert bands["held"].sum() == len(d)
     # well mixed by region: the top band's merges were all under the inlet, the bottom band's all elsewhere
-    assert result["mixed"]["under_inlet"] == pytest.approx(120.0 / bands["collisions_under_inlet"].sum(), rel=1e-12)
-    assert result["mixed"]["elsewhere"] == pytest.approx(30.0 / bands["collisions_elsewhere"].sum(), rel=1e-12)
+    assert result["mixed"]["under_inlet"] == pytest.approx(120.0 / bands["mixed_under_inlet"].sum(), rel=1e-12)
+    assert result["mixed"]["elsewhere"] == pytest.approx(30.0 / bands["mixed_elsewhere"].sum(), rel=1e-12)
     assert bands["efficiency_under_inlet"].iloc[0] == 0.0  # droplets there, no merges
-    top_elsewhere = bands["collisions_elsewhere"].iloc[-1]  # the demo's top band holds droplets under the inlet only
+    top_elsewhere = bands["mixed_elsewhere"].iloc[-1]  # the demo's top band holds droplets under the inlet only
     assert (top_elsewhere == 0.0 and math.isnan(bands["efficiency_elsewhere"].iloc[-1])) or \
         bands["efficiency_elsewhere"].iloc[-1] == 0.0
     for row in rows:  # the same merges a second earlier: the window 20-21 s holds no snapshot
@@ -163,3 +164,32 @@ def test_kernel_fit_recovers_known_efficiencies():
     se = noisy["standard_errors"]
     assert abs(noisy["gravitational"] - 1.0) < 3 * se[0] and abs(noisy["shear"] - 0.6) < 3 * se[1]
     assert -1.0 < noisy["correlation"] < 0.0  # the two kernels trade off against each other
+    proportional = kernel_fit(grav + shear, grav, 2.0 * grav)  # nothing tells the two apart
+    assert math.isnan(proportional["gravitational"]) and proportional["regions"] == 20
+
+
+def test_collisions_file_round_trips_and_a_stored_reference_reads_it(tmp_path):
+    """write_collisions measures a run (here the stored demo given a merge table, as a stand-in for a run folder)
+    and a stored reference that keeps the file gives back the same efficiencies from it, without measuring."""
+    from analysis.band_efficiency import COLLISIONS_FILE, measure_collisions, read_collisions, write_collisions
+    from settler.output import MERGES_BY_HEIGHT, PROFILE_BANDS, write_table
+
+    folder = tmp_path / "demo"
+    shutil.copytree("data/reference/demo", folder)
+    z = (np.arange(PROFILE_BANDS) + 0.5) * 0.01
+    rows = [{"time": t, "z": zk, "merges_under_inlet": n * (k + 1), "merges_elsewhere": n}
+            for t, n in ((10.0, 0.0), (25.0, 3.0)) for k, zk in enumerate(z)]
+    write_table(rows, MERGES_BY_HEIGHT, folder / "merges_by_height.csv")
+    measured = band_efficiency(folder)
+    path = write_collisions(folder, folder)
+    table, meta = read_collisions(path)
+    fresh, fresh_meta = measure_collisions(folder)
+    pd.testing.assert_frame_equal(table, fresh, rtol=1e-8, check_dtype=False)
+    assert meta["window"] == fresh_meta["window"] and meta["snapshots"] == fresh_meta["snapshots"]
+    assert meta["cell"] == 0.005 and meta["rate_scatter"] == pytest.approx(fresh_meta["rate_scatter"], rel=1e-12)
+    (folder / "merges_by_height.csv").unlink()  # the file alone now answers
+    stored = band_efficiency(folder)
+    assert stored["efficiency"] == pytest.approx(measured["efficiency"], rel=1e-8)
+    assert stored["standard_error"] == pytest.approx(measured["standard_error"], rel=1e-8)
+    assert stored["mixed"] == pytest.approx(measured["mixed"], rel=1e-8) and stored["kernels"] is None
+    assert (folder / COLLISIONS_FILE).read_text().startswith("# units: z [m], held [-]")

@@ -6,6 +6,7 @@ import json
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from analysis.sweep import DONE_FILE, load_run_set, point_hash, summarize, sweep, sweep_set
@@ -13,7 +14,7 @@ from settler.cases import CaseError, load_case
 from settler.output import read_time_series
 
 #: A demo run of 5 fluid steps of 4 ms with feed and coalescence: seconds once the kernels are compiled.
-SHORT = {"fulldem.end_time": 0.02, "fulldem.output_interval": 0.004, "fulldem.snapshot_interval": 0.0}
+SHORT = {"fulldem.end_time": 0.02, "fulldem.output_interval": 0.004, "fulldem.snapshot_interval": 0.01}
 
 
 def row_hash(result, name):
@@ -86,6 +87,9 @@ def test_a_run_set_of_full_runs_records_each_runs_own_metrics(tmp_path):
         assert first == "# resolved case; loaded from data/cases/demo.toml", first
         made = tmp_path / "out" / "points" / row_hash(result, name) / "case.toml"
         assert run.case.to_dict() == load_case(made).to_dict()  # only the comment changed
+        # the collisions by height, measured on the run folder with its whole slag grid (analysis.band_efficiency)
+        table = pd.read_csv(folder / "collisions_by_height.csv", comment="#")
+        assert len(table) == 10 and np.isfinite(table[["shear_under_inlet", "shear_elsewhere"]].to_numpy()).all()
 
 
 def test_an_interrupted_full_point_resumes_from_its_checkpoint(tmp_path):
