@@ -34,6 +34,10 @@ The efficiency of a band is its merges between the table's rows nearest the wind
 collision rate, taken as the mean over the snapshots in the window times its length. Standard error: the Poisson
 count of the merges and the standard error of the mean rate over the snapshots, in quadrature (one snapshot: the
 rate's scatter is unknown and only the count's part is given).
+
+A stored reference keeps few snapshots and one plane of the slag, so ``python -m analysis.reference set`` measures
+each run folder when it stores it and keeps the table as :data:`COLLISIONS_FILE` (:func:`write_collisions`), which
+:func:`band_efficiency` reads back.
 """
 
 from __future__ import annotations
