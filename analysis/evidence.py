@@ -455,8 +455,10 @@ def main(argv=None) -> int:
     parser.add_argument("--efficiency", nargs="+", metavar="RUN",
                         help="instead of the report, print the collision efficiency of each full RUN folder band by "
                              "band over its steady window (else its last third): its merges over the gravitational "
-                             "collisions of its droplets cell by cell (band_efficiency; needs merges_by_height.csv and "
-                             "a droplet snapshot in the window)")
+                             "collisions of its droplets cell by cell, and with the slag's whole grid the "
+                             "gravitational and shear efficiencies fitted together (band_efficiency; needs "
+                             "merges_by_height.csv and a droplet snapshot in the window, or a stored reference's "
+                             "collisions_by_height.csv)")
     parser.add_argument("--cell", type=float, default=None,
                         help="cell edge for --efficiency [m] (default: the run's fulldem.cell_size)")
     parser.add_argument("--layer", type=float, default=FLOOR_LAYER,
