@@ -171,6 +171,67 @@ def kernel_fit(merges, gravitational, shear) -> dict:
             "correlation": float(covariance[0, 1] / (se[0] * se[1])), "chi2_reduced": chi2, "regions": int(used.sum())}
 
 
+def merges_between(table: pd.DataFrame, window: tuple[float, float], where="the run") -> tuple[float, float,
+                                                                                        pd.DataFrame]:
+    """(t0, t1 [s], the merges by band between them: a DataFrame of z [m], merges_under_inlet, merges_elsewhere [-]) of
+    a cumulative ``merges_by_height`` table, between its rows nearest the ``window`` (start, end) [s]; ValueError
+    naming ``where`` if the window holds no two rows."""
+    times = np.unique(table["time"].to_numpy(dtype=float))
+    t0 = float(times[np.argmin(np.abs(times - window[0]))])
+    t1 = float(times[np.argmin(np.abs(times - window[1]))])
+    if not t1 > t0:
+        raise ValueError(f"{where}: window {window[0]:g}-{window[1]:g} s holds no two merges_by_height rows "
+                         f"(snapshots at {times[0]:g}-{times[-1]:g} s)")
+    columns = ["merges_under_inlet", "merges_elsewhere"]
+    first = table[table["time"] == t0].set_index("z")
+    last = table[table["time"] == t1].set_index("z")
+    bands = (last[columns] - first[columns]).reset_index().sort_values("z").reset_index(drop=True)
+    return t0, t1, bands
+
+
+class _Folder:
+    """A full run folder read with :mod:`analysis.files` alone (what :func:`measure_collisions` needs of an
+    :class:`analysis.Run`: its case, time series, merge table, droplet and slag snapshots)."""
+
+    def __init__(self, folder):
+        from settler.cases import load_case
+        from settler.output import OutputError, read_time_series
+
+        from .files import snapshot_files
+
+        self.folder = Path(folder)
+        if not (self.folder / "timeseries.csv").is_file():
+            raise OutputError(f"{self.folder}: not a run folder (no timeseries.csv)")
+        self.case = load_case(self.folder / "case.toml")
+        self.timeseries = read_time_series(self.folder / "timeseries.csv")
+        self.is_reference = (self.folder / "reference.json").is_file()
+        path = self.folder / "merges_by_height.csv"
+        self.zones = {"merges_by_height": pd.read_csv(path, comment="#")} if path.is_file() else {}
+        self._snapshots = {t: (d, f) for t, d, f in snapshot_files(self.folder)}
+
+    def snapshot_times(self):
+        return [t for t, (d, _) in self._snapshots.items() if d is not None]
+
+    def droplets(self, time):
+        from .files import droplets_file
+
+        return time, droplets_file(self._snapshots[time][0])
+
+    def slag(self, time):
+        from .files import NoData, slag_file
+
+        path = self._snapshots[time][1]
+        if path is None:
+            raise NoData(f"no slag snapshot at t = {time:g} s")
+        return (time, *slag_file(path))
+
+
+def _as_run(run):
+    """An :class:`analysis.Run` (or anything with its case, timeseries, zones, snapshot_times, droplets, slag and
+    folder) as it is; a folder as :class:`_Folder`."""
+    return _Folder(run) if isinstance(run, (str, Path)) else run
+
+
 #: The measured table of a run, stored beside a reference (which keeps too few snapshots and one slag plane to measure
 #: it again): per height band, the droplets held, the merges and the collisions of every kind over the window
 #: recorded in the header.
@@ -202,12 +263,13 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
     one)}). Raises ValueError for a run without merges_by_height.csv or without a droplet snapshot in the window."""
     from fulldem.boundaries import Inlet
 
-    from .evidence import merge_shares
-    from .runs import load_run
+    from .steady import window_of
 
-    run = load_run(run)
-    shares = merge_shares(run, window)
-    t0, t1 = shares["window"]
+    run = _as_run(run)
+    table = run.zones.get("merges_by_height")
+    if table is None or table.empty:
+        raise ValueError(f"{run.folder}: no merges_by_height.csv (full runs made before a04ea13 lack it)")
+    t0, t1, merged = merges_between(table, window or window_of(run.timeseries)[0], run.folder)
     times = [float(t) for t in run.snapshot_times() if t0 <= t <= t1]
     if not times:
         raise ValueError(f"{run.folder}: no droplet snapshot within {t0:g}-{t1:g} s (the merge table's rows): "
@@ -215,7 +277,7 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
     case, g = run.case, run.case.geometry
     height = float(g.height)
     cell = float(case.fulldem.cell_size) if cell is None else float(cell)
-    places = shares["bands"][["merges_under_inlet", "merges_elsewhere"]].to_numpy()
+    places = merged[["merges_under_inlet", "merges_elsewhere"]].to_numpy()
     bands = len(places)
     inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, height, g.inlet_length or 0.0)
     volumes = np.outer(np.full(bands, height / bands), [inlet.area, g.width * g.depth - inlet.area])
@@ -239,7 +301,7 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
         gravitational, shearing = (np.mean([x[i] for x in kernels], axis=0) * duration for i in (0, 1))
     else:
         gravitational = shearing = np.full((bands, 2), np.nan)
-    table = pd.DataFrame({"z": shares["bands"]["z"].to_numpy(), "held": np.mean(held, axis=0),
+    table = pd.DataFrame({"z": merged["z"].to_numpy(), "held": np.mean(held, axis=0),
                           "merges_under_inlet": places[:, 0], "merges_elsewhere": places[:, 1],
                           "collisions": rates.mean(axis=0) * duration,
                           "mixed_under_inlet": mixed[:, 0], "mixed_elsewhere": mixed[:, 1],
@@ -290,17 +352,15 @@ def band_efficiency(run, window: tuple[float, float] | None = None, cell: float 
     band by band: :func:`efficiencies` of :func:`measure_collisions` (same arguments), or, for a stored reference
     that keeps a :data:`COLLISIONS_FILE` and no ``window`` or ``cell`` is asked for, of that file (measured on the
     whole run folder when it was stored)."""
-    from .runs import load_run
-
-    run = load_run(run)
-    stored = run.folder / COLLISIONS_FILE
+    run = _as_run(run)
+    stored = Path(run.folder) / COLLISIONS_FILE
     if run.is_reference and stored.is_file() and window is None and cell is None:
         return efficiencies(*read_collisions(stored))
     return efficiencies(*measure_collisions(run, window, cell, shear))
 
 
 def write_collisions(run_folder, dest) -> Path:
-    """Measure the run folder ``run_folder`` (:func:`measure_collisions` over its steady window or last third) and
+    """Measure the run folder (or :class:`analysis.Run`) ``run_folder`` (:func:`measure_collisions` over its steady window or last third) and
     write :data:`COLLISIONS_FILE` into the folder ``dest`` (atomically), the window, snapshots, cell and the rate's
     scatter in its header."""
     from settler.output import atomic_write_text, units_line

@@ -38,56 +38,15 @@ import pandas as pd
 from settler.derived import settling_velocity
 from settler.output import half_volume_radius
 
-from .band_efficiency import band_efficiency, cell_collision_rates  # noqa: F401
+from .band_efficiency import band_efficiency, cell_collision_rates, merges_between  # noqa: F401
 from .kernel_run import (EXPOSURE_FILE, collision_efficiency, kernel_exposure, kernel_run_efficiency,  # noqa: F401
                          pair_exposure, write_kernel_exposure)
 from .runs import REDUCED_ENGINE, load_run
+from .steady import CYCLE, STEADY_CYCLES, STEADY_TOLERANCE, steady_window, window_of  # noqa: F401
 
-#: Burst cycle of the plume in simple and cubic [s] (measured on the old stored runs: 5-s bursts).
-CYCLE = 5.0
-#: Cycle means within this relative distance of their common mean [-].
-STEADY_TOLERANCE = 0.02
-#: Whole cycles the steady window must hold [-].
-STEADY_CYCLES = 3
 #: (coarse, fine) runs of the resolution checks in :func:`report`: the same case at 5 mm and finer cells.
 RESOLUTION_PAIRS = (("deep", "deep_fine"), ("demo", "demo_cell_33"), ("demo", "demo_cell_25"),
                     ("demo_feed_half", "demo_feed_half_fine"), ("demo_feed_double", "demo_feed_double_fine"))
-
-
-def steady_window(timeseries: pd.DataFrame, column: str = "droplet_count", cycle: float = CYCLE,
-                  tolerance: float = STEADY_TOLERANCE, cycles: int = STEADY_CYCLES) -> dict:
-    """The earliest steady start of ``column`` (module docstring), in whole cycles back from the run's last output:
-    {"start": t0 [s] or NaN if no window of ``cycles`` blocks is steady, "cycles": blocks in the window, "mean": the
-    mean of the block means, "block_means", "spread": max abs(block mean / mean - 1)}."""
-    t = timeseries["time"].to_numpy(dtype=float)
-    y = timeseries[column].to_numpy(dtype=float)
-    end = t[-1]
-    most = int(math.floor((end - t[0]) / cycle + 1e-9))
-    for blocks in range(most, cycles - 1, -1):
-        edges = end - cycle * np.arange(blocks, -1, -1)
-        means = []
-        for low, high in zip(edges[:-1], edges[1:]):
-            inside = (t > low + 1e-9) & (t <= high + 1e-9)
-            means.append(float(y[inside].mean()) if inside.any() else math.nan)
-        means = np.array(means)
-        if not np.isfinite(means).all():
-            continue
-        mean = float(means.mean())
-        spread = float(np.max(np.abs(means / mean - 1.0)))
-        if spread <= tolerance:
-            return {"start": float(edges[0]), "cycles": blocks, "mean": mean, "block_means": means.tolist(),
-                    "spread": spread}
-    return {"start": math.nan, "cycles": 0, "mean": math.nan, "block_means": [], "spread": math.nan}
-
-
-def window_of(series: pd.DataFrame) -> tuple[tuple[float, float], bool]:
-    """((start, end) [s], steady?) of a time series: its steady window (:func:`steady_window`), else its last
-    third (``steady`` False)."""
-    end = float(series["time"].iloc[-1])
-    found = steady_window(series)
-    if math.isfinite(found["start"]):
-        return (float(found["start"]), end), True
-    return (end * 2.0 / 3.0, end), False
 
 
 def steady_means(timeseries: pd.DataFrame, columns, start: float, end: float | None = None) -> dict[str, float]:
@@ -166,16 +125,8 @@ def merge_shares(run, window: tuple[float, float] | None = None) -> dict:
         raise ValueError(f"{run.folder}: no merges_by_height.csv (full runs made before a04ea13 lack it)")
     if window is None:
         window, _ = window_of(run.timeseries)
-    times = np.unique(table["time"].to_numpy(dtype=float))
-    t0 = float(times[np.argmin(np.abs(times - window[0]))])
-    t1 = float(times[np.argmin(np.abs(times - window[1]))])
-    if not t1 > t0:
-        raise ValueError(f"{run.folder}: window {window[0]:g}-{window[1]:g} s holds no two merges_by_height rows "
-                         f"(snapshots at {times[0]:g}-{times[-1]:g} s)")
-    first = table[table["time"] == t0].set_index("z")
-    last = table[table["time"] == t1].set_index("z")
+    t0, t1, bands = merges_between(table, window, run.folder)
     columns = ["merges_under_inlet", "merges_elsewhere"]
-    bands = (last[columns] - first[columns]).reset_index().sort_values("z").reset_index(drop=True)
     merges = float(bands[columns].to_numpy().sum())
     per_band = bands[columns].sum(axis=1).to_numpy()
     share = (lambda x: float(x) / merges) if merges > 0.0 else (lambda x: math.nan)

@@ -69,7 +69,7 @@ def test_a_runs_efficiency_is_its_merges_over_the_collisions_of_its_snapshot(tmp
             rows.append({"time": t, "z": zk, "merges_under_inlet": top if k == PROFILE_BANDS - 1 else 0.0,
                          "merges_elsewhere": bottom if k == 0 else 0.0})
     write_table(rows, MERGES_BY_HEIGHT, folder / "merges_by_height.csv")
-    result = band_efficiency(folder, (20.0, 25.0))
+    result = band_efficiency(load_run(folder), (20.0, 25.0))  # a Run: the stored snapshots stand in for a run's
     assert result["window"] == (20.0, 25.0) and result["snapshots"] == [25.0] and result["cell"] == 0.005
     assert result["kernels"] is None  # a stored reference keeps one plane of the slag: no shear rates
 
@@ -95,7 +95,7 @@ def test_a_runs_efficiency_is_its_merges_over_the_collisions_of_its_snapshot(tmp
         row["time"] = 21.0 if row["time"] == 25.0 else row["time"]
     write_table(rows, MERGES_BY_HEIGHT, folder / "merges_by_height.csv")
     with pytest.raises(ValueError, match="no droplet snapshot within 20-21 s"):
-        band_efficiency(folder, (20.0, 21.0))
+        band_efficiency(load_run(folder), (20.0, 21.0))
 
 
 def test_well_mixed_regions_give_the_uniform_suspension_kernel():
@@ -172,6 +172,7 @@ def test_collisions_file_round_trips_and_a_stored_reference_reads_it(tmp_path):
     """write_collisions measures a run (here the stored demo given a merge table, as a stand-in for a run folder)
     and a stored reference that keeps the file gives back the same efficiencies from it, without measuring."""
     from analysis.band_efficiency import COLLISIONS_FILE, measure_collisions, read_collisions, write_collisions
+    from analysis.runs import load_run
     from settler.output import MERGES_BY_HEIGHT, PROFILE_BANDS, write_table
 
     folder = tmp_path / "demo"
@@ -180,10 +181,11 @@ def test_collisions_file_round_trips_and_a_stored_reference_reads_it(tmp_path):
     rows = [{"time": t, "z": zk, "merges_under_inlet": n * (k + 1), "merges_elsewhere": n}
             for t, n in ((10.0, 0.0), (25.0, 3.0)) for k, zk in enumerate(z)]
     write_table(rows, MERGES_BY_HEIGHT, folder / "merges_by_height.csv")
-    measured = band_efficiency(folder)
-    path = write_collisions(folder, folder)
+    run = load_run(folder)  # a Run: the stored snapshots stand in for a run folder's
+    measured = band_efficiency(run)
+    path = write_collisions(run, folder)
     table, meta = read_collisions(path)
-    fresh, fresh_meta = measure_collisions(folder)
+    fresh, fresh_meta = measure_collisions(run)
     pd.testing.assert_frame_equal(table, fresh, rtol=1e-8, check_dtype=False)
     assert meta["window"] == fresh_meta["window"] and meta["snapshots"] == fresh_meta["snapshots"]
     assert meta["cell"] == 0.005 and meta["rate_scatter"] == pytest.approx(fresh_meta["rate_scatter"], rel=1e-12)

@@ -263,8 +263,9 @@ def test_report_says_where_a_run_with_the_merge_table_merges(tmp_path):
     assert "50 % under the inlet, 50 % in the top tenth of the height, 50 % in the bottom tenth" in line
     assert "over 10-25 s: 13.33 per s" in line
     # the window holds the stored 13 and 25 s snapshots: the efficiency line is band_efficiency's over that window
+    from analysis import load_run
     from analysis.evidence import band_efficiency
-    e = band_efficiency(root / "demo", (10.0, 25.0))
+    e = band_efficiency(load_run(root / "demo"), (10.0, 25.0))
     line = next(x for x in report(root).splitlines() if x.startswith("demo collision efficiency where it merges"))
     assert f"E = {e['efficiency']:.3f} +- {e['standard_error']:.3f} in 5 mm cells over 2 snapshot(s)" in line
 

@@ -1,0 +1,57 @@
+"""The rule for "steady" in a run's time series, shared by the evidence, the calibration and the collision
+measures (:mod:`analysis.evidence` re-exports it): the means of consecutive blocks one burst cycle long
+(:data:`CYCLE`, 5 s: the plume's bursts in simple and cubic), counted back from the run's end, all lie within
+±:data:`STEADY_TOLERANCE` (2 %) of their common mean, over at least :data:`STEADY_CYCLES` (3) blocks; the window with
+the most blocks that passes. Cycle means, not single rows: the count swings ±6-7 % within a burst and ±1-2 % between
+cycles. Times in s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+#: Burst cycle of the plume in simple and cubic [s] (measured on the old stored runs: 5-s bursts).
+CYCLE = 5.0
+#: Cycle means within this relative distance of their common mean [-].
+STEADY_TOLERANCE = 0.02
+#: Whole cycles the steady window must hold [-].
+STEADY_CYCLES = 3
+
+
+def steady_window(timeseries: pd.DataFrame, column: str = "droplet_count", cycle: float = CYCLE,
+                  tolerance: float = STEADY_TOLERANCE, cycles: int = STEADY_CYCLES) -> dict:
+    """The earliest steady start of ``column`` (module docstring), in whole cycles back from the run's last output:
+    {"start": t0 [s] or NaN if no window of ``cycles`` blocks is steady, "cycles": blocks in the window, "mean": the
+    mean of the block means, "block_means", "spread": max abs(block mean / mean - 1)}."""
+    t = timeseries["time"].to_numpy(dtype=float)
+    y = timeseries[column].to_numpy(dtype=float)
+    end = t[-1]
+    most = int(math.floor((end - t[0]) / cycle + 1e-9))
+    for blocks in range(most, cycles - 1, -1):
+        edges = end - cycle * np.arange(blocks, -1, -1)
+        means = []
+        for low, high in zip(edges[:-1], edges[1:]):
+            inside = (t > low + 1e-9) & (t <= high + 1e-9)
+            means.append(float(y[inside].mean()) if inside.any() else math.nan)
+        means = np.array(means)
+        if not np.isfinite(means).all():
+            continue
+        mean = float(means.mean())
+        spread = float(np.max(np.abs(means / mean - 1.0)))
+        if spread <= tolerance:
+            return {"start": float(edges[0]), "cycles": blocks, "mean": mean, "block_means": means.tolist(),
+                    "spread": spread}
+    return {"start": math.nan, "cycles": 0, "mean": math.nan, "block_means": [], "spread": math.nan}
+
+
+def window_of(series: pd.DataFrame) -> tuple[tuple[float, float], bool]:
+    """((start, end) [s], steady?) of a time series: its steady window (:func:`steady_window`), else its last
+    third (``steady`` False)."""
+    end = float(series["time"].iloc[-1])
+    found = steady_window(series)
+    if math.isfinite(found["start"]):
+        return (float(found["start"]), end), True
+    return (end * 2.0 / 3.0, end), False
