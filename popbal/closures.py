@@ -132,6 +132,15 @@ not one constant: 0.034 and 0.043 in simple and cubic, 0.014 and 0.058 in deep's
 5 mm: the roof is one cell thick in the demo family and not resolved there. ``settler calibrate --set --closures
 layers`` takes c_L as the geometric mean over the transport runs and delta as their mean thickness.
 
+The slag feed flows through the roof. fulldem brings the slag in as a velocity inlet over the inlet disk
+(fulldem.boundaries.InletDisk), so under the inlet the slag moves down at w = Q_s / A_L (cubic: 0.40 mm/s; deep's
+cases 0.40 mm/s too, where spread over the box it would be 0.013 mm/s), and the roof layer drains at u_L + w plus
+its droplets' hindered settling. The steady layer then holds j = phi (u_L + w), a quadratic in I,
+(c_L drho g / mu) I^2 + (w / delta) I = j (:func:`roof_inventory` with ``slag_velocity``; its inverse
+:func:`roof_coefficient` measures c_L = (j - w I / delta) mu / (drho g I^2) from a run's zone diagnostics). Below the
+roof the slag's downflow stays spread over the box: in the channel it is under 1 % of the plume's velocity (cubic:
+0.40 against about 60 mm/s) and in the outer zone the return flow dominates it.
+
 Bottom layer (``bottom_layer_factor`` f_b; zone "bottom"). The full runs hold matte just above the floor (demo:
 volume fraction 5.8e-3 in the bottom 10 mm against 1e-3 over mid-height; without coalescence 40e-3, 82 000 of 107
 000 droplets within 20 mm of the floor), and almost none of it returns with the slag: the upward droplet flux below
@@ -208,17 +217,41 @@ def cloud_profile(z, height, channel_radius, channel_coefficient, layer_thicknes
     return coefficient, radius
 
 
-def roof_inventory(volume_flux_density, excess_density, viscosity, coefficient, gravity=STANDARD_GRAVITY):
-    """Steady matte volume per unit area I = phi delta = sqrt(j mu / (c_L drho g)) [m] of a roof layer fed at the
-    volume flux density j [m/s] that drains at u_L = c_L phi drho g delta^2 / mu (module docstring): independent
-    of the thickness delta."""
-    return math.sqrt(volume_flux_density * viscosity / (coefficient * excess_density * gravity))
+def roof_inventory(volume_flux_density, excess_density, viscosity, coefficient, gravity=STANDARD_GRAVITY,
+                   slag_velocity=0.0, thickness=None):
+    """Steady matte volume per unit area I = phi delta [m] of a roof layer fed at the volume flux density j [m/s]
+    that drains at u_L = c_L phi drho g delta^2 / mu plus the slag's velocity w [m/s] through the inlet
+    (``slag_velocity``; module docstring): j = phi (u_L + w), i.e.
+
+        (c_L drho g / mu) I^2 + (w / delta) I - j = 0,
+
+    whose positive root is I; without slag (w = 0) I = sqrt(j mu / (c_L drho g)), independent of the thickness
+    delta [m] (``thickness``, needed only where w > 0). Dilute: the droplets' own settling is neglected."""
+    a = coefficient * excess_density * gravity / viscosity
+    if slag_velocity == 0.0:
+        return math.sqrt(volume_flux_density / a)
+    if not thickness or thickness <= 0.0:
+        raise ValueError(f"thickness = {thickness!r} m: a roof layer with slag flowing through it (slag_velocity = "
+                         f"{slag_velocity!r} m/s) needs its thickness > 0")
+    b = slag_velocity / thickness
+    return 2.0 * volume_flux_density / (b + math.sqrt(b * b + 4.0 * a * volume_flux_density))
 
 
-def roof_coefficient(volume_flux_density, inventory, excess_density, viscosity, gravity=STANDARD_GRAVITY):
-    """c_L = j mu / (drho g I^2) [-]: the roof law's coefficient that holds the measured matte volume per unit area
-    I [m] at the feed flux density j [m/s] (the inverse of :func:`roof_inventory`)."""
-    return volume_flux_density * viscosity / (excess_density * gravity * inventory * inventory)
+def roof_coefficient(volume_flux_density, inventory, excess_density, viscosity, gravity=STANDARD_GRAVITY,
+                     slag_velocity=0.0, thickness=None):
+    """c_L = (j - w I / delta) mu / (drho g I^2) [-]: the roof law's coefficient that holds the measured matte volume
+    per unit area I [m] at the feed flux density j [m/s] with the slag flowing through the layer at w [m/s] (the
+    inverse of :func:`roof_inventory`; without slag j mu / (drho g I^2) and delta [m] is not needed). NaN where
+    the slag alone would carry more than the feed (j <= w I / delta: no cloud drainage to measure)."""
+    carried = 0.0
+    if slag_velocity != 0.0:
+        if not thickness or thickness <= 0.0:
+            raise ValueError(f"thickness = {thickness!r} m: a roof layer with slag flowing through it "
+                             f"(slag_velocity = {slag_velocity!r} m/s) needs its thickness > 0")
+        carried = slag_velocity * inventory / thickness
+    if volume_flux_density <= carried:
+        return math.nan
+    return (volume_flux_density - carried) * viscosity / (excess_density * gravity * inventory * inventory)
 
 
 def flux_channel_radius(volume_flux, velocity, radius_factor):

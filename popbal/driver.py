@@ -202,6 +202,8 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
                     work.velocities[zone], work.volume_fraction[zone], work.collective[zone])
     if zone == OUTER and model.return_velocity > 0.0:
         work.velocities[zone] -= model.return_velocity  # the slag rises at u_up outside the plume
+    if zone == ROOF:  # the slag feed flows through the roof at its inlet velocity, not spread over the box
+        work.velocities[zone, -1] += model.roof_slag_velocity - model.downflow[-1]
     if zone == BOTTOM:  # the plume turns over the layer's thickness: G = shear_coefficient u_c / h_b
         work.shear[zone] = 0.0
         work.shear[zone, 0] = p["shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \

@@ -48,7 +48,8 @@ class Model:
     zone_area (4,) [m^2]: channel, outer, roof, bottom; the layers' are their volume per cell height (A_L delta / dz
     and A_box h_b / dz), so that their one cell (the top, the bottom) holds the layer's volume (0: no such layer).
     bottom_thickness h_b [m]. roof_thickness delta [m] and roof_coefficient / roof_radius (J,): the roof cell's cloud
-    law (c_L, delta in the top cell, 0 below). feed_number_rate (K,) [1/s]: droplets fed per second per section.
+    law (c_L, delta in the top cell, 0 below); roof_slag_velocity [m/s]: the slag feed's velocity through the roof
+    layer, which enters over the inlet disk (:func:`roof_slag_velocity`; in place of downflow's in the roof cell). feed_number_rate (K,) [1/s]: droplets fed per second per section.
     zone_feed_fraction (2,) [-]. feed_multiplier [-] and feed_end [s]: the feed is feed_multiplier x the case's rate
     while t < feed_end. downflow (J,) [m/s]: slag velocity at each cell's lower face; sink_rate (J,) [1/s]: slag
     withdrawal per unit volume. velocity_table (K, M) [m/s] single-droplet settling velocity over age, age_step [s].
@@ -92,6 +93,7 @@ class Model:
     roof_coefficient: np.ndarray = field(default_factory=lambda: np.zeros(0))
     roof_radius: np.ndarray = field(default_factory=lambda: np.zeros(0))
     bottom_thickness: float = 0.0
+    roof_slag_velocity: float = 0.0
 
     @property
     def roof(self) -> bool:
@@ -264,7 +266,18 @@ def build(case: Case) -> Model:
                  horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
                  viscosity=case.slag_viscosity, cloud_coefficient=cloud_coefficient, cloud_radius=cloud_radius,
                  parameters=parameters, return_velocity=return_velocity, roof_thickness=p.roof_thickness or 0.0,
-                 roof_coefficient=roof_coefficient, roof_radius=roof_radius, bottom_thickness=bottom_thickness)
+                 roof_coefficient=roof_coefficient, roof_radius=roof_radius, bottom_thickness=bottom_thickness,
+                 roof_slag_velocity=roof_slag_velocity(case, roof_volume > 0.0, horizontal))
+
+
+def roof_slag_velocity(case: Case, roof: bool, horizontal: bool) -> float:
+    """The slag's downward velocity through the roof layer [m/s]: the slag feed's volume rate over the inlet disk,
+    where fulldem's velocity inlet brings it in (popbal.closures, roof layer); 0 without a roof, without slag feed
+    or in 'horizontal' slag flow (the column model, whose slag moves sideways)."""
+    rate = case.slag.feed_rate / case.slag.density
+    if not roof or horizontal or rate == 0.0:
+        return 0.0
+    return rate / (math.pi * (0.5 * case.geometry.inlet_diameter) ** 2)
 
 
 def bottom_layer(case: Case, channel_radius: float) -> float:
@@ -437,7 +450,10 @@ def start_up_numbers(model: Model) -> list[Quantity]:
             Quantity("feed layer velocity u_L (steady, dilute)", _layer_velocity(model, q_channel, excess), "m/s",
                      "sqrt(c_L j drho g / mu) delta, j = Q_ch / (pi R_c^2); nan without a feed layer"),
             Quantity("roof layer's steady matte per unit area", _roof_inventory(model, q_channel, excess), "m",
-                     "sqrt(j mu / (c_L drho g)), j = Q_ch / inlet area; nan without a roof layer"),
+                     "(c_L drho g / mu) I^2 + (w / delta) I = j, j = Q_ch / inlet area, w the slag's velocity "
+                     "through it; nan without a roof layer"),
+            Quantity("slag velocity through the roof layer w", model.roof_slag_velocity if model.roof else math.nan,
+                     "m/s", "slag feed over the inlet disk; nan without a roof layer"),
             Quantity("bottom layer thickness h_b", model.bottom_thickness if model.bottom else math.nan, "m",
                      "bottom_layer_factor x R_c; nan without a bottom layer"),
             Quantity("channel shear rate G", model.parameters["shear_coefficient"] * u_c / model.channel_radius,
@@ -473,4 +489,4 @@ def _roof_inventory(model: Model, volume_flux: float, excess_density: float) -> 
         return math.nan
     flux = volume_flux / (math.pi * model.inlet_radius**2)
     return closures.roof_inventory(flux, excess_density, model.viscosity, model.case.popbal.roof_layer_coefficient,
-                                   model.gravity)
+                                   model.gravity, model.roof_slag_velocity, model.roof_thickness)

@@ -106,6 +106,49 @@ def test_layers_keep_the_mass_with_coalescence_and_reaction():
     assert a["merges"][-1].sum() == pytest.approx(merged, rel=1e-9) and a["merges"][-1][ROOF].sum() > 0.0
 
 
+def test_slag_feed_flows_through_the_roof_at_the_inlet_velocity():
+    """fulldem brings the slag in over the inlet disk, so the roof layer under it drains at u_L + w with
+    w = Q_s / A_inlet (cubic: 0.40 mm/s), not at the box-spread Q_s / A_box (0.17 mm/s): the steady layer against
+    the balance phi (c_L phi drho g delta^2 / mu + w + U_own (1 - phi)^n) = j solved here."""
+    model = popbal.setup("cubic", ["coalescence.enabled=false", "reaction.enabled=false", "feed.scale_std=0",
+                                   "popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
+                                   "popbal.channel_coefficient=0.4", "popbal.return_flow_ratio=0.05"] + LAYERS[:2]
+                         + ["popbal.end_time=30", "popbal.output_interval=10"])
+    result = popbal.run(model, progress=False)
+    case = model.case
+    inlet = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
+    j = case.feed.mass_rate / case.matte.density / inlet
+    w_inlet = case.slag.feed_rate / case.slag.density / inlet
+    w_box = case.slag.feed_rate / case.slag.density / (case.geometry.width * case.geometry.depth)
+    drho = case.matte.density - case.slag.density
+    own = settling_velocity(case, case.feed.mean_diameter)
+    n = model.parameters["hindered_exponent"]
+
+    def steady(w):
+        def balance(phi):
+            cloud = C_L * phi * drho * STANDARD_GRAVITY * DELTA**2 / model.viscosity
+            return phi * (cloud + w + own * richardson_zaki_factor(phi, n)) - j
+        return brentq(balance, 1e-12, 0.5, xtol=1e-15)
+
+    got = _volume_fraction(result, ROOF, -1)
+    print(f"\nroof with slag feed: phi {got:.6g}; balance at the inlet velocity {w_inlet * 1e3:.3f} mm/s "
+          f"{steady(w_inlet):.6g}, spread over the box ({w_box * 1e3:.3f} mm/s) {steady(w_box):.6g}")
+    assert model.roof_slag_velocity == pytest.approx(w_inlet, rel=1e-12)
+    assert got == pytest.approx(steady(w_inlet), rel=1e-4)
+    assert abs(steady(w_box) / steady(w_inlet) - 1.0) > 0.02  # the test tells the two apart
+    # the dilute law with the slag's velocity, and its inverse
+    inventory = roof_inventory(j, drho, model.viscosity, C_L, STANDARD_GRAVITY, w_inlet, DELTA)
+    phi = inventory / DELTA
+    assert phi * (C_L * phi * drho * STANDARD_GRAVITY * DELTA**2 / model.viscosity + w_inlet) \
+        == pytest.approx(j, rel=1e-12)
+    assert roof_coefficient(j, inventory, drho, model.viscosity, STANDARD_GRAVITY, w_inlet, DELTA) \
+        == pytest.approx(C_L, rel=1e-12)
+    assert math.isnan(roof_coefficient(j, 2.0 * j * DELTA / w_inlet, drho, model.viscosity, STANDARD_GRAVITY,
+                                       w_inlet, DELTA))  # the slag alone would carry more than the feed
+    with pytest.raises(ValueError, match="thickness"):
+        roof_inventory(j, drho, model.viscosity, C_L, STANDARD_GRAVITY, w_inlet)
+
+
 @pytest.mark.parametrize("overrides, names", [
     (["popbal.roof_thickness=0.005"], "roof_layer_coefficient"),
     (["popbal.roof_layer_coefficient=0.1"], "roof_thickness"),

@@ -152,8 +152,9 @@ def radius_factor_from_zones(runs, reference_dir: str | Path) -> dict:
 def roof_from_zones(runs, reference_dir: str | Path) -> dict:
     """The roof law's c_L [-] and thickness delta [m] from the roof layer of the zone diagnostics (``zones.csv``):
     per run, over its steady window, the matte volume per unit area I = mean(roof_thickness x roof_volume_fraction)
-    and c_L = j mu / (drho g I^2) (popbal.closures.roof_coefficient, j the matte feed over the inlet disk); c_L
-    the geometric mean over the runs, delta the mean thickness."""
+    and c_L = (j - w I / delta) mu / (drho g I^2) (popbal.closures.roof_coefficient, j the matte feed over the inlet
+    disk, w the slag feed's velocity through it, delta the run's mean roof thickness); c_L the geometric mean over
+    the runs, delta the mean thickness."""
     import math
 
     from analysis.runs import load_run
@@ -170,9 +171,12 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
         rows = zones[(zones["time"] >= start) & (zones["time"] <= end)]
         inventory = float((rows["roof_thickness"] * rows["roof_volume_fraction"].fillna(0.0)).mean())
         case = load_case(folder / "case.toml")
-        flux = case.feed.mass_rate / case.matte.density / (math.pi * (0.5 * case.geometry.inlet_diameter) ** 2)
-        per_run[run] = roof_coefficient(flux, inventory, case.matte.density - case.slag.density, case.slag_viscosity)
+        inlet = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
+        flux = case.feed.mass_rate / case.matte.density / inlet
+        slag = 0.0 if case.popbal.slag_flow == "horizontal" else case.slag.feed_rate / case.slag.density / inlet
         thickness.append(float(rows["roof_thickness"].mean()))
+        per_run[run] = roof_coefficient(flux, inventory, case.matte.density - case.slag.density, case.slag_viscosity,
+                                        slag_velocity=slag, thickness=thickness[-1])
     coefficient = float(np.exp(np.mean(np.log(list(per_run.values())))))
     return {"coefficient": coefficient, "thickness": float(np.mean(thickness)), "per_run": per_run, "runs": list(runs)}
 
