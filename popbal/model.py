@@ -49,7 +49,8 @@ class Model:
     and A_box h_b / dz), so that their one cell (the top, the bottom) holds the layer's volume (0: no such layer).
     bottom_thickness h_b [m]. roof_thickness delta [m] and roof_coefficient / roof_radius (J,): the roof cell's cloud
     law (c_L, delta in the top cell, 0 below); roof_slag_velocity [m/s]: the slag feed's velocity through the roof
-    layer, which enters over the inlet disk (:func:`roof_slag_velocity`; in place of downflow's in the roof cell). feed_number_rate (K,) [1/s]: droplets fed per second per section.
+    layer, which enters over the inlet disk (:func:`roof_slag_velocity`; in place of downflow's in the roof cell).
+    feed_number_rate (K,) [1/s]: droplets fed per second per section.
     zone_feed_fraction (2,) [-]. feed_multiplier [-] and feed_end [s]: the feed is feed_multiplier x the case's rate
     while t < feed_end. downflow (J,) [m/s]: slag velocity at each cell's lower face; sink_rate (J,) [1/s]: slag
     withdrawal per unit volume. velocity_table (K, M) [m/s] single-droplet settling velocity over age, age_step [s].
