@@ -139,7 +139,9 @@ its droplets' hindered settling. The steady layer then holds j = phi (u_L + w), 
 (c_L drho g / mu) I^2 + (w / delta) I = j (:func:`roof_inventory` with ``slag_velocity``; its inverse
 :func:`roof_coefficient` measures c_L = (j - w I / delta) mu / (drho g I^2) from a run's zone diagnostics). Below the
 roof the slag's downflow stays spread over the box: in the channel it is under 1 % of the plume's velocity (cubic:
-0.40 against about 60 mm/s) and in the outer zone the return flow dominates it.
+0.40 against about 60 mm/s) and in the outer zone the return flow dominates it. With the slag term the roof
+coefficients of the paragraph above become 0.036 in cubic (next to simple's 0.034, which has no slag feed: the two
+share geometry and feed), 0.013 and 0.044 in deep's 50 and 20 mm columns; the demo family has no slag feed.
 
 Bottom layer (``bottom_layer_factor`` f_b; zone "bottom"). The full runs hold matte just above the floor (demo:
 volume fraction 5.8e-3 in the bottom 10 mm against 1e-3 over mid-height; without coalescence 40e-3, 82 000 of 107

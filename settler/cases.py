@@ -253,7 +253,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "roof_layer_coefficient": Field(F, "-", "c_L of the roof layer: a well-mixed layer of thickness "
                                                 "roof_thickness under the whole inlet disk that takes the channel's "
                                                 "feed and the return flow's risers and drains into the channel at "
-                                                "u_L = c_L phi drho g delta^2 / mu, so it holds sqrt(j mu / "
+                                                "u_L = c_L phi drho g delta^2 / mu plus the slag feed's velocity "
+                                                "through the inlet disk, so without slag feed it holds sqrt(j mu / "
                                                 "(c_L drho g)) of matte per unit area at a feed flux j "
                                                 "(popbal.closures); absent: no roof layer.", 0.0,
                                         exclusive_minimum=True, optional=True),
