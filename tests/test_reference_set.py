@@ -1,6 +1,7 @@
 """Every stored reference run (data/reference/<name>/) is evidence: it loads with analysis.load_run, names the
 command, commit and seed that made it from a clean tree, names no folder of the machine that made it, conserves
-matte to round-off, and all of them ran one engine (equal engine trees in reference.json)."""
+matte to round-off, all of them ran one engine (equal engine trees in reference.json), and `settler figures` draws
+each of them."""
 
 from __future__ import annotations
 
@@ -47,6 +48,18 @@ def test_provenance_names_command_commit_seed_and_a_clean_tree(folder):
     for text in (info["command"], json.dumps(info.get("metadata", {}).get("command", "")),
                  (folder / "case.toml").read_text()):
         assert not MACHINE_PATHS.search(text), text[:200]
+
+
+@pytest.mark.parametrize("folder", STORED, ids=lambda p: p.name)
+def test_settler_figures_renders_every_stored_run(folder, tmp_path):
+    """`settler figures` draws every figure of every stored run (the reference-run issue's "settler figures
+    renders every stored run"): none is skipped, each a non-empty PNG."""
+    from analysis import figures
+
+    written = figures.render_all(folder, tmp_path / "figs")
+    not_drawn = {name: why for name, why in written.items() if not isinstance(why, Path)}
+    assert written and not not_drawn, not_drawn
+    assert all(path.suffix == ".png" and path.stat().st_size > 0 for path in written.values())
 
 
 def _engines() -> tuple[dict, list[dict]]:
