@@ -355,3 +355,49 @@ def test_a_run_is_scored_under_the_fitted_closures_alone_as_the_written_layer_is
     assert applied.popbal.plume_reynolds_scale is None
     expected = window_means(popbal.run(popbal.setup(applied), progress=False).timeseries, (2.0, 4.0))
     assert scored == expected
+
+
+def _roof_reference(tmp_path, name="cubic"):
+    """A copy of a stored reference's files that roof_from_zones reads."""
+    import shutil
+
+    folder = tmp_path / name
+    folder.mkdir()
+    for f in ("timeseries.csv", "zones.csv", "case.toml", "reference.json"):
+        shutil.copy(f"data/reference/{name}/{f}", folder / f)
+    return folder
+
+
+def test_roof_coefficient_from_zones_counts_the_slag_that_flows_through_the_roof(tmp_path):
+    """The layers closures' c_L from cubic's zone diagnostics: j = phi (c_L phi drho g delta^2 / mu + w) with the
+    slag feed's velocity w through the inlet disk (fulldem's velocity inlet), recomputed here from the files; and a
+    roof the slag alone would carry is refused with the run named, not averaged in as NaN."""
+    from analysis.calibration.hierarchy import roof_from_zones
+    from analysis.steady import window_of as steady_window_of
+    from settler.cases import load_case
+    from settler.physics import STANDARD_GRAVITY
+
+    folder = _roof_reference(tmp_path)
+    got = roof_from_zones(["cubic"], tmp_path)
+    case = load_case(folder / "case.toml")
+    series = pd.read_csv(folder / "timeseries.csv", comment="#")
+    (start, end), _ = steady_window_of(series)
+    zones = pd.read_csv(folder / "zones.csv", comment="#")
+    rows = zones[(zones.time >= start) & (zones.time <= end)]
+    thickness = rows.roof_thickness.mean()
+    phi = (rows.roof_thickness * rows.roof_volume_fraction.fillna(0.0)).mean() / thickness
+    inlet = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
+    j = case.feed.mass_rate / case.matte.density / inlet
+    w = case.slag.feed_rate / case.slag.density / inlet
+    drho = case.matte.density - case.slag.density
+    c_l = (j / phi - w) * case.slag_viscosity / (phi * drho * STANDARD_GRAVITY * thickness**2)
+    assert got["per_run"]["cubic"] == pytest.approx(c_l, rel=1e-9)
+    assert got["thickness"] == pytest.approx(thickness, rel=1e-12)
+    without_slag = j * case.slag_viscosity / (drho * STANDARD_GRAVITY * (phi * thickness) ** 2)
+    assert without_slag / got["per_run"]["cubic"] > 1.1  # the slag term matters in cubic (0.043 against 0.036)
+
+    # a roof so full that the slag alone would carry twice the feed through it: no c_L to measure
+    zones.loc[:, "roof_volume_fraction"] *= 2.0 * j / (w * phi)
+    zones.to_csv(folder / "zones.csv", index=False)
+    with pytest.raises(ValueError, match="carried by the slag feed alone"):
+        roof_from_zones(["cubic"], tmp_path)

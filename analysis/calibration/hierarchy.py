@@ -177,6 +177,11 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
         thickness.append(float(rows["roof_thickness"].mean()))
         per_run[run] = roof_coefficient(flux, inventory, case.matte.density - case.slag.density, case.slag_viscosity,
                                         slag_velocity=slag, thickness=thickness[-1])
+        if not per_run[run] > 0.0:
+            raise ValueError(f"{folder}: its roof layer (matte {inventory:.3g} m per unit area, {thickness[-1]:.3g} m "
+                             f"thick) is carried by the slag feed alone ({slag:.3g} m/s through the inlet against "
+                             f"the matte's {flux:.3g} m/s): no cloud drainage to measure c_L from; leave the run out "
+                             "of the level or use a closure set without a roof layer")
     coefficient = float(np.exp(np.mean(np.log(list(per_run.values())))))
     return {"coefficient": coefficient, "thickness": float(np.mean(thickness)), "per_run": per_run, "runs": list(runs)}
 
