@@ -159,6 +159,7 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
 
     from analysis.runs import load_run
     from popbal.closures import roof_coefficient
+    from popbal.model import roof_slag_velocity
     from settler.cases import load_case
 
     from .targets import window_of
@@ -173,7 +174,7 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
         case = load_case(folder / "case.toml")
         inlet = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
         flux = case.feed.mass_rate / case.matte.density / inlet
-        slag = 0.0 if case.popbal.slag_flow == "horizontal" else case.slag.feed_rate / case.slag.density / inlet
+        slag = roof_slag_velocity(case, roof=True, horizontal=case.popbal.slag_flow == "horizontal")
         thickness.append(float(rows["roof_thickness"].mean()))
         per_run[run] = roof_coefficient(flux, inventory, case.matte.density - case.slag.density, case.slag_viscosity,
                                         slag_velocity=slag, thickness=thickness[-1])
