@@ -350,12 +350,15 @@ def band_efficiency(run, window: tuple[float, float] | None = None, cell: float 
                     shear: bool = True) -> dict:
     """The collision efficiency of ``run`` (a full run folder or stored reference, or an :class:`analysis.Run`)
     band by band: :func:`efficiencies` of :func:`measure_collisions` (same arguments), or, for a stored reference
-    that keeps a :data:`COLLISIONS_FILE` and no ``window`` or ``cell`` is asked for, of that file (measured on the
-    whole run folder when it was stored)."""
+    that keeps a :data:`COLLISIONS_FILE`, no ``cell`` is asked for and ``window`` is None or the file's own window
+    (within 1 ms at either end), of that file (measured on the whole run folder when it was stored; the reference's
+    own few snapshots would give a measure over one or two of them)."""
     run = _as_run(run)
     stored = Path(run.folder) / COLLISIONS_FILE
-    if run.is_reference and stored.is_file() and window is None and cell is None:
-        return efficiencies(*read_collisions(stored))
+    if run.is_reference and stored.is_file() and cell is None:
+        table, meta = read_collisions(stored)
+        if window is None or all(abs(float(a) - b) <= 1e-3 for a, b in zip(window, meta["window"])):
+            return efficiencies(table, meta)
     return efficiencies(*measure_collisions(run, window, cell, shear))
 
 

@@ -282,6 +282,8 @@ def report(root="data/reference") -> str:
         lines.append(f"{name} collision efficiency where it merges: E = {e['efficiency']:.3f} +- "
                      f"{e['standard_error']:.3f} in {1e3 * e['cell']:g} mm cells over {len(e['snapshots'])} "
                      f"snapshot(s), by band top first " + " ".join(f"{x:.2f}" for x in e["bands"]["efficiency"][::-1]))
+        if e["kernels"] is not None:  # the gravitational and shear efficiencies, where the slag's shear was measured
+            lines.extend(_kernel_lines(e["kernels"]))
     for coarse, fine in RESOLUTION_PAIRS:
         if coarse in runs and fine in runs:
             end = min(summaries[fine]["end_time"], summaries[coarse]["end_time"])

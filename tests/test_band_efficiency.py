@@ -194,4 +194,9 @@ def test_collisions_file_round_trips_and_a_stored_reference_reads_it(tmp_path):
     assert stored["efficiency"] == pytest.approx(measured["efficiency"], rel=1e-8)
     assert stored["standard_error"] == pytest.approx(measured["standard_error"], rel=1e-8)
     assert stored["mixed"] == pytest.approx(measured["mixed"], rel=1e-8) and stored["kernels"] is None
+    # asked for the file's own window (as the evidence report asks, with the run's steady window), the file answers
+    # too, not the one or two snapshots the reference keeps inside the window
+    again = band_efficiency(folder, meta["window"])
+    assert again["efficiency"] == pytest.approx(measured["efficiency"], rel=1e-8)
+    assert again["snapshots"] == meta["snapshots"]
     assert (folder / COLLISIONS_FILE).read_text().startswith("# units: z [m], held [-]")
