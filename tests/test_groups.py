@@ -62,3 +62,17 @@ def test_the_reference_design_is_a_set_of_valid_full_runs():
         check_case(run.case)  # raises CaseError on a case the engine refuses
     kernel = next(r for r in runs if r.name == "kernel")
     assert kernel.droplets is not None and Path(kernel.droplets).is_file()
+
+
+def test_the_readme_group_table_is_the_design_files():
+    """data/reference/README.md's a priori table is what `python -m analysis.groups data/reference/design.toml`
+    prints, row for row: a run added to or changed in the design file shows up in the README (it had kept simple
+    at 45 s and cubic at 75 s after the design file moved them to 60 and 160 s, and lacked deep_w015)."""
+    from pathlib import Path
+
+    from analysis.groups import design_table
+
+    readme = Path("data/reference/README.md").read_text(encoding="utf-8").splitlines()
+    start = next(k for k, line in enumerate(readme) if line.startswith("| run | family | case and overrides"))
+    stop = next((k for k in range(start, len(readme)) if not readme[k].startswith("|")), len(readme))
+    assert readme[start:stop] == design_table("data/reference/design.toml").splitlines()
