@@ -157,8 +157,22 @@ state holds phi_b U_h(phi_b) = Q / A_box, which has a solution only below the la
 max phi U (1 - phi)^n of the droplets (0.029 mm/s for the demo's fresh 0.5 mm matte against its 0.048 mm/s feed
 flux): above it the layer fills, as a settling bed would, until coalescence makes its droplets fast enough.
 
+The layers' own kernels and the floor's drainage (``roof_collision_efficiency``, ``roof_shear_coefficient``,
+``bottom_drain_coefficient``; absent: the channel's efficiency and shear coefficient, no drainage). The remade
+reference runs' zone diagnostics (docs/guide/reduced-model.md) measure the roof apart from the channel: its merges
+over the collisions of its droplets well mixed over the top tenth under the inlet, with the gravitational and 0.65 x
+the shear kernel, are 1.9-3.5 in every training run (the droplets cluster 1.9-3.5 times within the band; cell by
+cell the engine merges about one collision in one), where one efficiency for every zone had to stand for the
+channel as well; and the slag's shear there is about 4 over the roof's own residence time, G t_V = 2.8-5.9, where
+t_V = delta / u_L is what ``roof_shear_coefficient`` multiplies the inverse of: G = roof_shear_coefficient u_L /
+delta. The floor: the full runs' droplets cross their bottom 10 mm in 1.3-5 s (demo family) where their own
+settling would take 17 s, driven by the plume's discharge, so the bottom layer's droplets may reach the floor at
+U_h + bottom_drain_coefficient x the plume's droplet velocity (transport x u_s). All three are exploratory closures,
+not yet calibrated (no stored layer sets them).
+
 Both layers integrate dc/dt = inflow - (v / h) c exactly over a step (popbal.driver), so their steady states hold
-whatever the step; tests/test_popbal_layers.py checks both against their closed forms.
+whatever the step; tests/test_popbal_layers.py checks both against their closed forms (the bottom layer's with and
+without its drainage) and that the roof's own kernel keys scale its merges alone.
 
 Not modelled (calibration will tell whether they matter): the exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel, and, in the
 simple case's lower half, carries them out of the slag jet), the cloud's break-up, and inertia of the plume

@@ -208,6 +208,11 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
         work.shear[zone] = 0.0
         work.shear[zone, 0] = p["shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \
             / model.bottom_thickness
+        # the plume's discharge drives the layer's droplets into the floor (bottom_drain_coefficient; 0: none)
+        work.velocities[zone, 0] += p["bottom_drain"] * p["plume_velocity"] * p["transport_factor"]
+    elif zone == ROOF:  # G = roof_shear_coefficient u_L / delta, the layer's own drainage over its thickness
+        work.shear[zone] = 0.0
+        np.divide(p["roof_shear_coefficient"] * work.collective[zone], radius, out=work.shear[zone], where=radius > 0.0)
     elif zone != OUTER and model.channel_radius > 0.0:
         # G = shear_coefficient u / R with the cell's cloud scale (R_c in the plume, delta in a layer)
         work.shear[zone] = 0.0
@@ -357,12 +362,13 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
             _reach_floor(model, work, books, area)
         books.lost += work.sink_out * area
         if p["coalescence"]:
+            efficiency = p["roof_efficiency"] if zone == ROOF else p["efficiency"]
             before = content[zone, :, NUMBER, :].sum(axis=1)
             most = max(most, coalesce_zone(
                 content[zone], work.diameters[zone], work.velocities[zone], work.densities[zone],
                 work.volume_fraction[zone], work.shear[zone], grid.pivots, grid.target, grid.loss_weight, dt,
                 p["density_slag"], p["interfacial_tension"], p["psi"], p["virtual_mass"], p["form"],
-                p["threshold"], p["rule"], p["efficiency"], p["speed_limit"], p["max_rate_step"], work.beta,
+                p["threshold"], p["rule"], efficiency, p["speed_limit"], p["max_rate_step"], work.beta,
                 work.births, work.k1, work.k2, work.trial, p["busy_partners"], p["growth_target"], p["growth_rate"]))
             # each binary event removes one droplet (the cell-average technique keeps number and volume of births)
             books.merges[zone] += (before - content[zone, :, NUMBER, :].sum(axis=1)) * area * dz

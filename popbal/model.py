@@ -236,6 +236,12 @@ def build(case: Case) -> Model:
         "hindered_exponent": p.hindered_exponent,
         "channel_coefficient": plume_coefficient,
         "shear_coefficient": p.shear_coefficient,
+        # the roof layer's own kernel and the bottom layer's drainage (popbal.closures); absent: the channel's, none
+        "roof_efficiency": p.collision_efficiency if p.roof_collision_efficiency is None
+        else p.roof_collision_efficiency,
+        "roof_shear_coefficient": p.shear_coefficient if p.roof_shear_coefficient is None
+        else p.roof_shear_coefficient,
+        "bottom_drain": p.bottom_drain_coefficient or 0.0,
         # the slag on the axis runs at u_s, the droplets' cloud at transport x u_s
         "axis_velocity_ratio": (1.0 if p.axis_velocity_ratio is None else p.axis_velocity_ratio) / transport,
         "plume_velocity": plume_velocity,
@@ -251,6 +257,14 @@ def build(case: Case) -> Model:
         "growth_target": c.growth_target,
         "growth_rate": c.growth_rate,
     }
+    for key, layer, needs in (("roof_collision_efficiency", roof_volume > 0.0, "popbal.roof_layer_coefficient and "
+                               "popbal.roof_thickness"),
+                              ("roof_shear_coefficient", roof_volume > 0.0, "popbal.roof_layer_coefficient and "
+                               "popbal.roof_thickness"),
+                              ("bottom_drain_coefficient", bottom_thickness > 0.0, "popbal.bottom_layer_factor")):
+        if getattr(p, key) is not None and not layer:
+            raise CaseError(f"popbal.{key} = {getattr(p, key)!r}: sets a layer this case does not have; allowed only "
+                            f"with {needs} (or leave it out)")
     ratio = p.return_flow_ratio or 0.0
     if ratio > 0.0 and (channel_area == 0.0 or zone_area[OUTER] <= 0.0):
         raise CaseError(f"popbal.return_flow_ratio = {ratio!r}: needs a channel zone inside the box "

@@ -268,6 +268,19 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                              "volume fraction; none of it turns into the return flow "
                                              "(popbal.closures); absent: no bottom layer.", 0.0,
                                      exclusive_minimum=True, optional=True),
+        "roof_collision_efficiency": Field(F, "-", "Collision efficiency of the roof layer: its merges over the "
+                                                   "collisions of its droplets well mixed over the layer, i.e. the "
+                                                   "engine's local efficiency times how the droplets cluster inside "
+                                                   "the layer (popbal.closures); absent: collision_efficiency.", 0.0,
+                                           optional=True),
+        "roof_shear_coefficient": Field(F, "-", "The roof layer's shear rate G in units of u_L / delta, the layer's "
+                                                "drainage velocity over its thickness (popbal.closures); absent: "
+                                                "shear_coefficient.", 0.0, optional=True),
+        "bottom_drain_coefficient": Field(F, "-", "The bottom layer's droplets reach the floor at their own hindered "
+                                                  "settling velocity plus bottom_drain_coefficient x the plume's "
+                                                  "droplet velocity (its discharge driving them into the floor; "
+                                                  "popbal.closures); absent: their own settling alone.", 0.0,
+                                          optional=True),
         "axis_velocity_ratio": Field(F, "-", "Slag velocity on the channel axis (the channel_velocity output) / the "
                                              "plume velocity u_c that carries the droplets; absent: 1.", 0.0,
                                      exclusive_minimum=True, optional=True),

@@ -163,3 +163,74 @@ def test_slag_feed_flows_through_the_roof_at_the_inlet_velocity():
 def test_layer_keys_that_do_not_go_together_are_refused(overrides, names):
     with pytest.raises(CaseError, match=names):
         popbal.setup("demo", overrides)
+
+
+# --- the layers' own kernels and the floor's drainage (popbal.roof_collision_efficiency, roof_shear_coefficient,
+# bottom_drain_coefficient): the zone diagnostics of the reference runs measure them apart from the channel's
+
+DRAIN = 0.05  # bottom_drain_coefficient [-] (chosen for the test)
+
+
+@pytest.fixture(scope="module")
+def drained():
+    model = popbal.setup("demo", SINGLE_SIZE + LAYERS + [f"popbal.bottom_drain_coefficient={DRAIN}",
+                                                          "popbal.end_time=200", "popbal.output_interval=10"])
+    return model, popbal.run(model, progress=False)
+
+
+def test_drained_bottom_layer_holds_its_closed_form_volume_fraction(drained):
+    """With the plume driving its droplets into the floor at beta u_s (x the transport factor) on top of their own
+    hindered settling, the steady bottom layer holds phi (U_h(phi) + beta u_s) = Q / A_box: less than undrained."""
+    model, result = drained
+    case = model.case
+    q = case.feed.mass_rate / case.matte.density
+    box = case.geometry.width * case.geometry.depth
+    own = settling_velocity(case, case.feed.mean_diameter)
+    n = model.parameters["hindered_exponent"]
+    push = DRAIN * model.parameters["plume_velocity"] * model.parameters["transport_factor"]
+    expected = brentq(lambda phi: phi * (own * richardson_zaki_factor(phi, n) + push) - q / box, 1e-12, 0.5,
+                      xtol=1e-15)
+    undrained = brentq(lambda phi: phi * own * richardson_zaki_factor(phi, n) - q / box, 1e-12, 0.5, xtol=1e-15)
+    got = _volume_fraction(result, BOTTOM, 0)
+    print(f"\ndrained bottom: phi {got:.6g} against {expected:.6g} (undrained {undrained:.6g}), push "
+          f"{push * 1e3:.3f} mm/s against own settling {own * 1e3:.3f} mm/s")
+    assert got == pytest.approx(expected, rel=1e-4)
+    assert expected < 0.5 * undrained  # the push matters here: the check could not pass with the drain left out
+    assert np.abs(result.timeseries["mass_balance_error"]).max() < 1e-10
+
+
+def _early_roof_merges(extra):
+    """The roof layer's coalescence events after 0.3 s of the demo's feed (coalescence on, reaction off): early, so
+    that merging has not yet changed what the layer holds and its events grow linearly with the kernel."""
+    model = popbal.setup("demo", LAYERS[:2] + ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
+                                               "reaction.enabled=false", "popbal.collision_efficiency=1",
+                                               "popbal.shear_coefficient=0.5", "popbal.end_time=0.3",
+                                               "popbal.output_interval=0.3"] + extra)
+    result = popbal.run(model, progress=False)
+    return float(result.arrays["merges"][-1][ROOF].sum()), result
+
+
+def test_roof_kernel_keys_scale_the_roof_layers_merges_alone():
+    base, reference = _early_roof_merges([])
+    same, result = _early_roof_merges(["popbal.roof_collision_efficiency=1", "popbal.roof_shear_coefficient=0.5"])
+    # absent, the keys take the channel's values: the same run, bit for bit
+    assert np.array_equal(result.arrays["number_density"], reference.arrays["number_density"]) and same == base
+    doubled, result = _early_roof_merges(["popbal.roof_collision_efficiency=2"])
+    assert base > 0.0 and doubled / base == pytest.approx(2.0, rel=0.02)  # both kernels scale with it
+    # the channel's merges do not see the roof's efficiency beyond what the roof sends it (none merged yet)
+    assert result.arrays["merges"][-1][CHANNEL].sum() == pytest.approx(reference.arrays["merges"][-1][CHANNEL].sum(),
+                                                                         rel=0.02)
+    # the shear collisions add linearly in G = roof_shear_coefficient u_L / delta
+    no_shear, _ = _early_roof_merges(["popbal.roof_shear_coefficient=0"])
+    one, _ = _early_roof_merges(["popbal.roof_shear_coefficient=2"])
+    two, _ = _early_roof_merges(["popbal.roof_shear_coefficient=4"])
+    print(f"\nroof merges at 0.3 s: {base:.4g}, twice the efficiency {doubled:.4g}; roof shear coefficient 0 / 2 / 4: "
+          f"{no_shear:.4g} / {one:.4g} / {two:.4g}")
+    assert one > 1.2 * no_shear  # the shear's share is not negligible, so the next check tests it
+    assert (two - no_shear) / (one - no_shear) == pytest.approx(2.0, rel=0.02)
+
+
+@pytest.mark.parametrize("key", ["roof_collision_efficiency", "roof_shear_coefficient", "bottom_drain_coefficient"])
+def test_layer_kernel_keys_without_their_layer_are_refused(key):
+    with pytest.raises(CaseError, match=f"popbal.{key} = 2.0: sets a layer this case does not have"):
+        popbal.setup("demo", [f"popbal.{key}=2"])
