@@ -162,14 +162,14 @@ The layers' own kernels and the floor's drainage (``roof_collision_efficiency``,
 reference runs' zone diagnostics (docs/guide/reduced-model.md) measure the roof apart from the channel: its merges
 over the collisions of its droplets well mixed over the top tenth under the inlet, with the gravitational and 0.65 x
 the shear kernel, are 1.9-3.5 in every training run (the droplets cluster 1.9-3.5 times within the band; cell by
-cell the engine merges about one collision in one), where one efficiency for every zone had to stand for the
+cell the engine merges about one droplet pair per collision), where one efficiency for every zone had to stand for the
 channel as well; and the slag's shear there is about 4 over the roof's own residence time, G t_V = 2.8-5.9, where
 t_V = delta / u_L is what ``roof_shear_coefficient`` multiplies the inverse of: G = roof_shear_coefficient u_L /
 delta. The floor: without coalescence the full runs' droplets cross their bottom 10 mm 1.8-1.9 times faster than they
 settle hindered (the demo and deep's feed in its 50 mm column), pushed by the plume's discharge at 0.013-0.03 of
 popbal's plume velocity, so the bottom layer's droplets may reach the floor at U_h + bottom_drain_coefficient x
-the plume's droplet velocity (transport x u_s); with coalescence they cross 3-13 times faster, mostly by growing. All three are exploratory closures,
-not yet calibrated (no stored layer sets them).
+the plume's droplet velocity (transport x u_s); with coalescence they cross 3-13 times faster, mostly by growing.
+All three are exploratory closures, not yet calibrated (no stored layer sets them).
 
 Both layers integrate dc/dt = inflow - (v / h) c exactly over a step (popbal.driver), so their steady states hold
 whatever the step; tests/test_popbal_layers.py checks both against their closed forms (the bottom layer's with and
