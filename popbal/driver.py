@@ -210,13 +210,12 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
             / model.bottom_thickness
         # the plume's discharge drives the layer's droplets into the floor (bottom_drain_coefficient; 0: none)
         work.velocities[zone, 0] += p["bottom_drain"] * p["plume_velocity"] * p["transport_factor"]
-    elif zone == ROOF:  # G = roof_shear_coefficient u_L / delta, the layer's own drainage over its thickness
-        work.shear[zone] = 0.0
-        np.divide(p["roof_shear_coefficient"] * work.collective[zone], radius, out=work.shear[zone], where=radius > 0.0)
     elif zone != OUTER and model.channel_radius > 0.0:
-        # G = shear_coefficient u / R with the cell's cloud scale (R_c in the plume, delta in a layer)
+        # G = shear_coefficient u / R with the cell's cloud scale (R_c in the plume, delta in the roof layer, which
+        # has its own coefficient: roof_shear_coefficient, the channel's where absent)
+        coefficient = p["roof_shear_coefficient"] if zone == ROOF else p["shear_coefficient"]
         work.shear[zone] = 0.0
-        np.divide(p["shear_coefficient"] * work.collective[zone], radius, out=work.shear[zone], where=radius > 0.0)
+        np.divide(coefficient * work.collective[zone], radius, out=work.shear[zone], where=radius > 0.0)
     else:
         work.shear[zone] = 0.0
 

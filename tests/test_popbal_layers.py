@@ -65,14 +65,20 @@ def test_roof_layer_holds_its_closed_form_volume_fraction(steady):
         == pytest.approx(C_L, rel=1e-12)
 
 
-def test_bottom_layer_holds_its_closed_form_volume_fraction(steady):
-    model, result = steady
+def _bottom_closed_form(model, push=0.0):
+    """The steady bottom layer's phi with phi (U_h(phi) + push) = Q / A_box: the single fed size's hindered settling
+    plus a drainage velocity push [m/s], solved with brentq independently of the model."""
     case = model.case
     q = case.feed.mass_rate / case.matte.density
     box = case.geometry.width * case.geometry.depth
     own = settling_velocity(case, case.feed.mean_diameter)
     n = model.parameters["hindered_exponent"]
-    expected = brentq(lambda phi: phi * own * richardson_zaki_factor(phi, n) - q / box, 1e-12, 0.5, xtol=1e-15)
+    return brentq(lambda phi: phi * (own * richardson_zaki_factor(phi, n) + push) - q / box, 1e-12, 0.5, xtol=1e-15)
+
+
+def test_bottom_layer_holds_its_closed_form_volume_fraction(steady):
+    model, result = steady
+    expected = _bottom_closed_form(model)
     got = _volume_fraction(result, BOTTOM, 0)
     assert model.bottom_thickness == pytest.approx(model.channel_radius, rel=1e-12)
     print(f"\nbottom: phi {got:.6g} against {expected:.6g}, h_b {model.bottom_thickness * 1e3:.2f} mm")
@@ -182,15 +188,9 @@ def test_drained_bottom_layer_holds_its_closed_form_volume_fraction(drained):
     """With the plume driving its droplets into the floor at beta u_s (x the transport factor) on top of their own
     hindered settling, the steady bottom layer holds phi (U_h(phi) + beta u_s) = Q / A_box: less than undrained."""
     model, result = drained
-    case = model.case
-    q = case.feed.mass_rate / case.matte.density
-    box = case.geometry.width * case.geometry.depth
-    own = settling_velocity(case, case.feed.mean_diameter)
-    n = model.parameters["hindered_exponent"]
+    own = settling_velocity(model.case, model.case.feed.mean_diameter)
     push = DRAIN * model.parameters["plume_velocity"] * model.parameters["transport_factor"]
-    expected = brentq(lambda phi: phi * (own * richardson_zaki_factor(phi, n) + push) - q / box, 1e-12, 0.5,
-                      xtol=1e-15)
-    undrained = brentq(lambda phi: phi * own * richardson_zaki_factor(phi, n) - q / box, 1e-12, 0.5, xtol=1e-15)
+    expected, undrained = _bottom_closed_form(model, push), _bottom_closed_form(model)
     got = _volume_fraction(result, BOTTOM, 0)
     print(f"\ndrained bottom: phi {got:.6g} against {expected:.6g} (undrained {undrained:.6g}), push "
           f"{push * 1e3:.3f} mm/s against own settling {own * 1e3:.3f} mm/s")
