@@ -193,7 +193,7 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
     """Store the run folder ``run`` small as the reference ``dest_root/case_name/`` and return that folder.
 
     Copies ``timeseries.csv`` and ``case.toml`` (required), ``merges_by_size.csv`` and ``channel_profile.csv`` (if
-    present) unchanged; writes ``snapshots.npz`` with ``snapshots`` droplet snapshots chosen by
+    present) unchanged; writes ``snapshots.npz`` with ``snapshots`` droplet snapshots (0: none, no file) chosen by
     :func:`choose_snapshots` (float32; the slag velocity on the central x-z plane with each) and ``reference.json``
     (see the module docstring). ``command`` defaults to metadata.json's "command", ``commit`` to metadata.json's
     "commit", else ``git rev-parse HEAD`` of this repository (None if that fails). The folder is written as a temporary sibling and renamed over the
@@ -214,9 +214,9 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
     try:
         snapshots = int(snapshots)
     except (TypeError, ValueError):
-        raise StoreError(f"snapshots = {snapshots!r}: give a whole number >= 1") from None
-    if snapshots < 1:
-        raise StoreError(f"snapshots = {snapshots}: give at least 1")
+        raise StoreError(f"snapshots = {snapshots!r}: give a whole number >= 0") from None
+    if snapshots < 0:
+        raise StoreError(f"snapshots = {snapshots}: give 0 (none kept) or more")
     dest_root = Path(dest_root)
     dest = dest_root / name
     run_resolved, dest_resolved = run.resolve(), dest.resolve()
@@ -250,6 +250,8 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
     times = [t for t, _, _ in usable]
     if usable and snapshots > len(usable):
         notes.append(f"{snapshots} snapshots asked for, the run has {len(usable)}: all stored")
+    if usable and snapshots == 0:
+        notes.append(f"0 snapshots asked for: none of the run's {len(usable)} stored (no snapshots.npz)")
     y0 = None
     if usable:
         from settler.cases import CaseError, load_case
@@ -287,10 +289,10 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
 
         requested = snapshots
         count = min(requested, len(usable))
-        chosen = choose_snapshots(times, count) if usable else []
+        chosen = choose_snapshots(times, count) if usable and count > 0 else []
         while True:
             info_notes = list(notes)
-            if usable:
+            if chosen:
                 load(chosen)
                 _write_snapshots(tmp / SNAPSHOT_FILE, times, chosen, droplets, slag)
                 missing_slag = [times[i] for i in chosen if i not in slag]
@@ -301,7 +303,7 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
                          requested, info_notes)
             text = to_json(info)
             total = _folder_size(tmp) + len(text.encode("utf-8"))
-            if total <= SIZE_LIMIT or count <= 1 or not usable:
+            if total <= SIZE_LIMIT or count <= 1 or not chosen:
                 break
             per_snapshot = (tmp / SNAPSHOT_FILE).stat().st_size / count
             room = SIZE_LIMIT - (total - per_snapshot * count)
@@ -312,7 +314,7 @@ def store_reference(run, case_name, dest_root="data/reference", snapshots=4, com
             chosen = choose_snapshots(times, count)
         if total > SIZE_LIMIT:
             info["notes"].append(f"the folder is {total / 1e6:.3g} MB, over the {SIZE_LIMIT / 1e6:g} MB limit even "
-                                 f"with {count if usable else 'no'} snapshot(s)")
+                                 f"with {count if chosen else 'no'} snapshot(s)")
             text = to_json(info)
         (tmp / INFO_FILE).write_text(text + "\n", encoding="utf-8")
         _replace(tmp, dest)
@@ -540,7 +542,8 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
     its command the one that regenerates it alone (``settler sweep --set SET_FILE --engine full --only NAME``),
     with the kernel runs' exposure (:mod:`analysis.kernel_run`) and, for runs with coalescence and a merge table,
     their collisions by height (:data:`analysis.band_efficiency.COLLISIONS_FILE`), measured on the run folder.
-    Returns name -> the stored folder, or -> why it was not stored (not finished)."""
+    ``snapshots`` is the droplet snapshots each run keeps where its entry in the set has no ``snapshots`` key. Returns
+    name -> the stored folder, or -> why it was not stored (not finished)."""
     from analysis.sweep.execution import DONE_FILE, POINTS, point_hash
     from analysis.sweep.runset import load_run_set
 
@@ -555,8 +558,8 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
             results[run.name] = f"not finished ({folder} has no {DONE_FILE})"
             continue
         command = f"settler sweep --set {set_file} --engine full --only {run.name}"
-        results[run.name] = store_reference(folder, run.name, dest_root=dest_root, snapshots=snapshots,
-                                            command=command)
+        keep = snapshots if run.snapshots is None else run.snapshots
+        results[run.name] = store_reference(folder, run.name, dest_root=dest_root, snapshots=keep, command=command)
         if run.family == "kernel":  # E needs every snapshot's exposure; the reference keeps a few snapshots
             from analysis.kernel_run import fed_sizes, write_kernel_exposure
 
@@ -621,7 +624,9 @@ def _main_set(argv) -> int:
     parser.add_argument("sweep_out", help="the --out folder of 'settler sweep --set FILE --engine full'")
     parser.add_argument("--only", default=None, help="only these runs (comma-separated names)")
     parser.add_argument("--dest", default="data/reference", help="where references lie (default: data/reference)")
-    parser.add_argument("--snapshots", type=int, default=2, help="droplet snapshots per run (default: 2)")
+    parser.add_argument("--snapshots", type=int, default=2,
+                        help="droplet snapshots per run where the set file gives the run none (its key 'snapshots'; "
+                             "0 = none) (default: 2)")
     parser.add_argument("set_file", help="the run-set file of the sweep, as the stored commands should name it "
                                          "(e.g. data/reference/design.toml)")
     args = parser.parse_args(argv)

@@ -43,6 +43,7 @@ case = "demo"
 overrides = {{ {overrides}, "feed.mass_rate" = 0.004 }}
 family = "feed"
 purpose = "twice the feed"
+snapshots = 0
 """)
 
 
@@ -90,6 +91,11 @@ def test_a_run_set_of_full_runs_records_each_runs_own_metrics(tmp_path):
         # the collisions by height, measured on the run folder with its whole slag grid (analysis.band_efficiency)
         table = pd.read_csv(folder / "collisions_by_height.csv", comment="#")
         assert len(table) == 10 and np.isfinite(table[["shear_under_inlet", "shear_elsewhere"]].to_numpy()).all()
+    # the set's 'snapshots' key: double keeps none (and says so), base the command's default of 2
+    assert (stored["double"] / "snapshots.npz").exists() is False
+    assert load_run(stored["double"]).reference["snapshots"]["stored"] == 0
+    assert any("0 snapshots asked for" in note for note in load_run(stored["double"]).reference["notes"])
+    assert load_run(stored["base"]).reference["snapshots"]["stored"] == 2
 
 
 def test_an_interrupted_full_point_resumes_from_its_checkpoint(tmp_path):
@@ -123,6 +129,8 @@ def test_full_and_reduced_points_of_one_case_have_their_own_folders():
     ('[runs."a b"]\ncase = "demo"\n', "the name must be"),
     ('[runs.a]\ncase = "demo"\noverrides = { "slag.viscosity_reference" = -1.0 }\n', "run 'a'"),
     ('[runs.a]\ncase = "demo"\ndroplets = "none.csv"\n', "no such file"),
+    ('[runs.a]\ncase = "demo"\nsnapshots = -1\n', "snapshots = -1: allowed: a whole number >= 0"),
+    ('[runs.a]\ncase = "demo"\nsnapshots = 1.5\n', "snapshots = 1.5: allowed"),
     ('[set]\n', "no [runs.NAME] tables"),
     ('[runz.a]\ncase = "demo"\n', "unknown table(s) runz"),
 ])

@@ -14,6 +14,8 @@ design.toml``). The file is TOML::
     purpose = "the plume velocity's square-root law"   # optional
     droplets = "kernel_droplets.csv"              # optional (full engine): an initial droplet list, relative to
                                                   # this file (fulldem.io.droplet_list)
+    snapshots = 1                                 # optional: droplet snapshots its stored reference keeps (0 =
+                                                  # none; python -m analysis.reference set); not part of the run
 
 Each run is a point of the sweep machinery (:mod:`analysis.sweep.execution`): a folder ``OUT/points/<hash>/`` keyed
 by its resolved case, its engine and its droplet list, ``done.json`` written last; with ``--engine full`` a point is
@@ -43,7 +45,7 @@ from .execution import (METRICS, POINTS, Executor, check_engine, check_workers, 
                         write_dataset)
 
 #: Keys of a run's table in a run-set file; ``case`` is required.
-RUN_KEYS = ("case", "overrides", "family", "purpose", "droplets")
+RUN_KEYS = ("case", "overrides", "family", "purpose", "droplets", "snapshots")
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]*$")
 
 
@@ -57,6 +59,7 @@ class SetRun:
     purpose: str = ""
     droplets: str | None = None
     overrides: dict = field(default_factory=dict)
+    snapshots: int | None = None  # droplet snapshots its stored reference keeps (None: the store command's default)
 
 
 @dataclass
@@ -112,8 +115,12 @@ def load_run_set(path) -> RunSet:
             if not resolved.is_file():
                 raise CaseError(f"{where}: droplets = {droplets!r}: no such file next to {path}")
             droplets = str(resolved)
+        snapshots = entry.get("snapshots")
+        if snapshots is not None and (isinstance(snapshots, bool) or not isinstance(snapshots, int) or snapshots < 0):
+            raise CaseError(f"{where}: snapshots = {snapshots!r}: allowed: a whole number >= 0 (the droplet "
+                            "snapshots its stored reference keeps; 0 = none)")
         listed.append(SetRun(name, case, str(entry.get("family", "")), str(entry.get("purpose", "")), droplets,
-                             dict(overrides)))
+                             dict(overrides), snapshots))
     return RunSet(path, str(data.get("set", {}).get("description", "")), listed)
 
 
