@@ -37,7 +37,9 @@ rate's scatter is unknown and only the count's part is given).
 
 A stored reference keeps few snapshots and one plane of the slag, so ``python -m analysis.reference set`` measures
 each run folder when it stores it and keeps the table as :data:`COLLISIONS_FILE` (:func:`write_collisions`), which
-:func:`band_efficiency` reads back.
+:func:`band_efficiency` reads back. The table also keeps, per band under the inlet and elsewhere, the matte volume
+held and the slag's shear rate at the droplets: the zone quantities (roof inventory, roof and channel shear) that the
+reduced model's zones are fitted to, which likewise need every snapshot and the whole slag grid.
 """
 
 from __future__ import annotations
@@ -250,6 +252,14 @@ COLLISIONS_UNITS = {
                           "whole slag grid)"),
     "shear_elsewhere": ("-", "shear collisions cell by cell with the slag's shear rate, elsewhere (NaN: no whole "
                         "slag grid)"),
+    "volume_under_inlet": ("m^3", "mean matte volume of the band's droplets under the inlet over the window's "
+                           "snapshots"),
+    "volume_elsewhere": ("m^3", "mean matte volume of the band's droplets elsewhere over the window's snapshots"),
+    "shear_rate_under_inlet": ("1/s", "the slag's shear rate G = sqrt(2 S:S) at the band's droplets under the inlet, "
+                               "averaged over them and the window's snapshots (NaN: none there, or no whole slag "
+                               "grid)"),
+    "shear_rate_elsewhere": ("1/s", "the slag's shear rate at the band's droplets elsewhere, averaged over them and "
+                             "the window's snapshots (NaN: none there, or no whole slag grid)"),
 }
 
 
@@ -281,7 +291,7 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
     bands = len(places)
     inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, height, g.inlet_length or 0.0)
     volumes = np.outer(np.full(bands, height / bands), [inlet.area, g.width * g.depth - inlet.area])
-    rates, mixed, held, kernels = [], [], [], []
+    rates, mixed, held, volume, kernels = [], [], [], [], []
     for t in times:
         _, d = run.droplets(t)
         position = d[["x", "y", "z"]].to_numpy()
@@ -289,9 +299,14 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
         u = settling_velocity(case, diameter, d["density"].to_numpy())
         rates.append(cell_collision_rates(position, diameter, u, cell, height, bands))
         k = np.clip(np.floor(position[:, 2] / height * bands).astype(np.int64), 0, bands - 1)
-        mixed.append(region_collision_rates(k, inlet.contains(position[:, 0], position[:, 1]), diameter, u, volumes))
+        under = inlet.contains(position[:, 0], position[:, 1])
+        mixed.append(region_collision_rates(k, under, diameter, u, volumes))
         held.append(np.bincount(k, minlength=bands))
-        kernels.append(_region_kernels(run, t, position, diameter, u, inlet, bands) if shear else None)
+        place = np.where(under, 0, 1)
+        matte = np.zeros((bands, 2))
+        np.add.at(matte, (k, place), math.pi / 6.0 * diameter**3)
+        volume.append(matte)
+        kernels.append(_region_kernels(run, t, position, diameter, u, inlet, bands, (k, place)) if shear else None)
     duration = t1 - t0
     rates = np.array(rates)
     totals = rates.sum(axis=1)
@@ -299,15 +314,21 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
     mixed = np.mean(mixed, axis=0) * duration
     if all(x is not None for x in kernels):
         gravitational, shearing = (np.mean([x[i] for x in kernels], axis=0) * duration for i in (0, 1))
+        at_droplets, counted = (np.sum([x[i] for x in kernels], axis=0) for i in (2, 3))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            shear_rate = np.where(counted > 0, at_droplets / counted, np.nan)
     else:
-        gravitational = shearing = np.full((bands, 2), np.nan)
+        gravitational = shearing = shear_rate = np.full((bands, 2), np.nan)
+    volume = np.mean(volume, axis=0)
     table = pd.DataFrame({"z": merged["z"].to_numpy(), "held": np.mean(held, axis=0),
                           "merges_under_inlet": places[:, 0], "merges_elsewhere": places[:, 1],
                           "collisions": rates.mean(axis=0) * duration,
                           "mixed_under_inlet": mixed[:, 0], "mixed_elsewhere": mixed[:, 1],
                           "gravitational_under_inlet": gravitational[:, 0],
                           "gravitational_elsewhere": gravitational[:, 1],
-                          "shear_under_inlet": shearing[:, 0], "shear_elsewhere": shearing[:, 1]})
+                          "shear_under_inlet": shearing[:, 0], "shear_elsewhere": shearing[:, 1],
+                          "volume_under_inlet": volume[:, 0], "volume_elsewhere": volume[:, 1],
+                          "shear_rate_under_inlet": shear_rate[:, 0], "shear_rate_elsewhere": shear_rate[:, 1]})
     return table, {"window": (t0, t1), "snapshots": times, "cell": cell, "rate_scatter": scatter}
 
 
@@ -388,10 +409,11 @@ def read_collisions(path) -> tuple[pd.DataFrame, dict]:
     return pd.read_csv(path, comment="#"), meta
 
 
-def _region_kernels(run, time, position, diameter, velocity, inlet, bands):
+def _region_kernels(run, time, position, diameter, velocity, inlet, bands, where):
     """(gravitational, shear) collisions per second [1/s], (bands, 2) under the inlet and elsewhere, summed cell by
-    cell on the slag grid of the snapshot at ``time`` with its own shear rates; None where the snapshot's slag is
-    not a whole grid (a stored reference)."""
+    cell on the slag grid of the snapshot at ``time`` with its own shear rates, then the sum of the shear rate [1/s]
+    at the droplets and their number [-], (bands, 2) each, the droplets placed by ``where`` = (band, 0 under the
+    inlet / 1 elsewhere) per droplet; None where the snapshot's slag is not a whole grid (a stored reference)."""
     from .files import NoData
 
     try:
@@ -418,4 +440,7 @@ def _region_kernels(run, time, position, diameter, velocity, inlet, bands):
         total = np.zeros((bands, 2))
         np.add.at(total, (cell_band, place), values)
         out.append(total)
-    return out
+    at_droplets, counted = np.zeros((bands, 2)), np.zeros((bands, 2))
+    np.add.at(at_droplets, where, rate.reshape(-1)[key])
+    np.add.at(counted, where, 1.0)
+    return out + [at_droplets, counted]

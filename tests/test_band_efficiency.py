@@ -200,3 +200,51 @@ def test_collisions_file_round_trips_and_a_stored_reference_reads_it(tmp_path):
     assert again["efficiency"] == pytest.approx(measured["efficiency"], rel=1e-8)
     assert again["snapshots"] == meta["snapshots"]
     assert (folder / COLLISIONS_FILE).read_text().startswith("# units: z [m], held [-]")
+
+
+def test_shear_rate_and_volume_held_at_the_droplets_band_by_band():
+    """A stand-in run (the demo case, 0.1 m cube, 5 mm cells) whose slag is the simple shear u_x = G y with G = 2
+    1/s in every cell, and six droplets of known sizes: three under the inlet in the top band, two elsewhere in the
+    bottom band, one under the inlet in the bottom band. Every droplet sees G = 2 1/s (central and one-sided
+    differences are exact for a linear field), so each band and place that holds droplets averages 2 and the others
+    are NaN; the volume held is (pi/6) d^3 summed by band and place, the same at both snapshots."""
+    from types import SimpleNamespace
+
+    from analysis.band_efficiency import measure_collisions
+    from settler.cases import load_case
+    from settler.output import PROFILE_BANDS
+
+    case = load_case("demo")
+    g = case.geometry
+    h = 5e-3
+    axes = [np.arange(n) * h + h / 2 for n in (round(g.width / h), round(g.depth / h), round(g.height / h))]
+    x, y, z = np.meshgrid(*axes, indexing="ij")
+    centres = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    slag = np.column_stack([2.0 * centres[:, 1], np.zeros(len(centres)), np.zeros(len(centres))])
+    cx, cy = case.inlet_center[0], case.inlet_center[1]
+    far = (0.01, 0.01)  # a corner, outside the inlet disk
+    top, bottom = 0.095, 0.004
+    droplets = pd.DataFrame({"x": [cx, cx + 1e-3, cx - 1e-3, far[0], far[0] + 0.02, cx],
+                             "y": [cy, cy, cy + 1e-3, far[1], far[1], cy],
+                             "z": [top, top, top + 1e-3, bottom, bottom, bottom],
+                             "diameter": [1.0e-3, 0.5e-3, 0.8e-3, 0.6e-3, 0.7e-3, 0.9e-3]})
+    droplets["density"] = case.matte.density
+    bands_z = (np.arange(PROFILE_BANDS) + 0.5) * g.height / PROFILE_BANDS
+    merges = pd.DataFrame([{"time": t, "z": zk, "merges_under_inlet": 0.0, "merges_elsewhere": 0.0}
+                           for t in (1.0, 2.0) for zk in bands_z])
+    run = SimpleNamespace(case=case, folder="stand-in", zones={"merges_by_height": merges},
+                          timeseries=pd.DataFrame({"time": [0.0, 1.0, 2.0], "droplet_count": [6, 6, 6]}),
+                          snapshot_times=lambda: [1.0, 2.0], droplets=lambda t: (t, droplets),
+                          slag=lambda t: (t, centres, slag))
+    table, meta = measure_collisions(run, (1.0, 2.0))
+    assert meta["snapshots"] == [1.0, 2.0]
+    volume = math.pi / 6.0 * droplets["diameter"].to_numpy() ** 3
+    expected = np.zeros((PROFILE_BANDS, 2))
+    expected[-1, 0] = volume[:3].sum()
+    expected[0, 1] = volume[3:5].sum()
+    expected[0, 0] = volume[5]
+    assert table[["volume_under_inlet", "volume_elsewhere"]].to_numpy() == pytest.approx(expected, rel=1e-12)
+    rate = table[["shear_rate_under_inlet", "shear_rate_elsewhere"]].to_numpy()
+    held = expected > 0
+    assert rate[held] == pytest.approx(np.full(held.sum(), 2.0), rel=1e-9)
+    assert np.isnan(rate[~held]).all()
