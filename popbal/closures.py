@@ -112,6 +112,10 @@ discrepancy 0.19 against 0.21 with constants): the full engine's return flow is 
 size, its plume about sqrt(0.41) = 0.64 times as fast, and the two runs' errors (count +12 / -31 %, settling flux
 -29 / +4 %, axis velocity -21 / +5 %) are those of the constant closures, so the law does not yet explain why the
 deep family's plume is slower; the full runs' plume radius there is about one 5 mm cell (data/reference/README.md).
+Those figures were measured before 2026-12-05, when the channel's cloud law still had c_ch alone: the droplets and
+the reported axis velocity ran at the unconfined sqrt(c_ch Q drho g / (pi mu)) while u_s, the return flow and Re
+took c(R/R_c) (1.55 u_s at R/R_c = 2.6); the cloud law now has c_ch c(R/R_c) t^2 and carries the confined u_s
+(tests/test_popbal_channel_closure.py), and the measurement is to be made again.
 
 Roof layer (``roof_layer_coefficient`` c_L, ``roof_thickness`` delta; zone "roof"). In the full runs about half of
 the demo family's droplets sit in the top 10 mm, under the inlet (data/reference/<run>/zones.csv: the roof layer's

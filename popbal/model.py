@@ -170,8 +170,11 @@ def build(case: Case) -> Model:
     cells = p.height_cells
     dz = g.height / cells
     z = (np.arange(cells) + 0.5) * dz
-    # the droplets' cloud law in the plume carries them at transport x u_s (steady), so its coefficient is c_ch x t^2
-    plume_coefficient = p.channel_coefficient * transport**2
+    # the droplets' cloud law in the plume carries them at transport x u_s (steady), so its coefficient is c_ch x t^2,
+    # times the confined plume's c(R / R_c) under popbal.confinement, which u_s holds (channel_closure)
+    confined = closures.confined_plume_coefficient(column_radius(case) / channel_radius) \
+        if p.confinement and plume_velocity > 0.0 and channel_radius > 0.0 else 1.0
+    plume_coefficient = p.channel_coefficient * confined * transport**2
     cloud_coefficient, cloud_radius = closures.cloud_profile(z, g.height, channel_radius, plume_coefficient,
                                                              p.feed_layer_thickness, p.feed_layer_coefficient)
 
