@@ -71,11 +71,10 @@ def test_steady_axis_velocity_is_the_plume_velocity(reynolds_scale, confined):
     if reynolds_scale is not None:
         overrides["popbal.plume_reynolds_scale"] = reynolds_scale
     case = load_case("demo" if confined else "simple", overrides)
-    _, u_s, _, transport = channel_closure(case)
+    radius, u_s, _, transport = channel_closure(case)
     if confined:
         from popbal.model import column_radius
 
-        radius = channel_closure(case)[0]
         assert closures.confined_plume_coefficient(column_radius(case) / radius) == pytest.approx(0.41, abs=0.01)
     series = popbal.run(popbal.setup(case), progress=False).timeseries
     steady = series[(series["time"] >= 8.0) & (series["time"] <= 12.0)]
