@@ -28,7 +28,10 @@ resolved slag at the cell (:func:`cell_shear_rates`, from a run folder's fluid s
 plane and has none). With both kernels summed cell by cell over each band's two regions, the merges are fitted as
 E_g C_g + E_s C_s over the bands and regions (:func:`kernel_fit`): the gravitational and the shear efficiency of the
 full engine at its grid's scale, the two numbers popbal's kernel takes. Regions under the inlet (plume and layer,
-strong shear) and elsewhere (weak shear) give them leverage apart; their correlation is reported.
+strong shear) and elsewhere (weak shear) give them leverage apart; their correlation is reported. The shear
+collisions of each region's droplets well mixed, sheared at the mean shear rate at them
+(:func:`region_shear_rates`), are what a zone of popbal with that shear would count: beside the well-mixed
+gravitational ones they give a zone's own efficiency (the roof layer's, the channel's) as popbal applies it.
 
 The efficiency of a band is its merges between the table's rows nearest the window over the time integral of its
 collision rate, taken as the mean over the snapshots in the window times its length. Standard error: the Poisson
@@ -112,6 +115,22 @@ def region_collision_rates(band, under_inlet, diameter, velocity, volumes) -> np
     keys, sums = pair_sums(key, diameter, velocity)
     flat = rates.reshape(-1)
     flat[keys] = math.pi * sums / volumes.reshape(-1)[keys]
+    return rates
+
+
+def region_shear_rates(band, under_inlet, diameter, shear_rate, volumes) -> np.ndarray:
+    """Shear collisions per second [1/s] of droplets well mixed in each height band's two regions, under the inlet
+    and elsewhere, sheared at the region's own rate: (bands, 2) = (4/3) G_region sum over the region's pairs of
+    (a_i + a_j)^3 / V_region (Smoluchowski's simple-shear kernel, as popbal's zones apply it). band (n,) [int],
+    under_inlet (n,) [bool], diameter [m], shear_rate (bands, 2) [1/s] (NaN: none known, giving NaN where the region
+    holds a pair), volumes (bands, 2) [m^3] of the regions."""
+    volumes = np.asarray(volumes, dtype=float)
+    rates = np.zeros(volumes.shape)
+    key = 2 * np.asarray(band, dtype=np.int64) + np.where(under_inlet, 0, 1)
+    keys, sums = shear_pair_sums(key, diameter)
+    flat = rates.reshape(-1)
+    flat[keys] = (4.0 / 3.0) * np.asarray(shear_rate, dtype=float).reshape(-1)[keys] * sums / volumes.reshape(-1)[keys]
+    flat[keys[sums == 0.0]] = 0.0  # a lone droplet meets nobody, whatever the shear
     return rates
 
 
@@ -252,6 +271,10 @@ COLLISIONS_UNITS = {
                           "whole slag grid)"),
     "shear_elsewhere": ("-", "shear collisions cell by cell with the slag's shear rate, elsewhere (NaN: no whole "
                         "slag grid)"),
+    "mixed_shear_under_inlet": ("-", "shear collisions of the band's droplets under the inlet well mixed, sheared at "
+                                "the slag's shear rate at them (NaN: no whole slag grid)"),
+    "mixed_shear_elsewhere": ("-", "shear collisions of the band's droplets elsewhere well mixed, sheared at the "
+                              "slag's shear rate at them (NaN: no whole slag grid)"),
     "volume_under_inlet": ("m^3", "mean matte volume of the band's droplets under the inlet over the window's "
                            "snapshots"),
     "volume_elsewhere": ("m^3", "mean matte volume of the band's droplets elsewhere over the window's snapshots"),
@@ -291,7 +314,7 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
     bands = len(places)
     inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, height, g.inlet_length or 0.0)
     volumes = np.outer(np.full(bands, height / bands), [inlet.area, g.width * g.depth - inlet.area])
-    rates, mixed, held, volume, kernels = [], [], [], [], []
+    rates, mixed, held, volume, kernels, mixed_shear = [], [], [], [], [], []
     for t in times:
         _, d = run.droplets(t)
         position = d[["x", "y", "z"]].to_numpy()
@@ -307,6 +330,10 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
         np.add.at(matte, (k, place), math.pi / 6.0 * diameter**3)
         volume.append(matte)
         kernels.append(_region_kernels(run, t, position, diameter, u, inlet, bands, (k, place)) if shear else None)
+        if kernels[-1] is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rate_here = kernels[-1][2] / kernels[-1][3]  # the snapshot's shear rate at each region's droplets
+            mixed_shear.append(region_shear_rates(k, under, diameter, rate_here, volumes))
     duration = t1 - t0
     rates = np.array(rates)
     totals = rates.sum(axis=1)
@@ -317,8 +344,9 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
         at_droplets, counted = (np.sum([x[i] for x in kernels], axis=0) for i in (2, 3))
         with np.errstate(divide="ignore", invalid="ignore"):
             shear_rate = np.where(counted > 0, at_droplets / counted, np.nan)
+        mixed_shear = np.mean(mixed_shear, axis=0) * duration
     else:
-        gravitational = shearing = shear_rate = np.full((bands, 2), np.nan)
+        gravitational = shearing = shear_rate = mixed_shear = np.full((bands, 2), np.nan)
     volume = np.mean(volume, axis=0)
     table = pd.DataFrame({"z": merged["z"].to_numpy(), "held": np.mean(held, axis=0),
                           "merges_under_inlet": places[:, 0], "merges_elsewhere": places[:, 1],
@@ -327,6 +355,7 @@ def measure_collisions(run, window: tuple[float, float] | None = None, cell: flo
                           "gravitational_under_inlet": gravitational[:, 0],
                           "gravitational_elsewhere": gravitational[:, 1],
                           "shear_under_inlet": shearing[:, 0], "shear_elsewhere": shearing[:, 1],
+                          "mixed_shear_under_inlet": mixed_shear[:, 0], "mixed_shear_elsewhere": mixed_shear[:, 1],
                           "volume_under_inlet": volume[:, 0], "volume_elsewhere": volume[:, 1],
                           "shear_rate_under_inlet": shear_rate[:, 0], "shear_rate_elsewhere": shear_rate[:, 1]})
     return table, {"window": (t0, t1), "snapshots": times, "cell": cell, "rate_scatter": scatter}

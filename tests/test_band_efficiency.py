@@ -116,6 +116,22 @@ def test_well_mixed_regions_give_the_uniform_suspension_kernel():
     assert rates[1, 1] == 0.0 and rates[0, 0] == 0.0
 
 
+def test_well_mixed_shear_is_smoluchowskis_kernel():
+    """N equal droplets of radius a well mixed in a region of volume V sheared at G meet (4/3) G (2a)^3 N (N - 1) / 2
+    / V times a second (Smoluchowski's simple-shear rate, beta n^2 V / 2 with beta = (4/3) G (2a)^3 and n = N / V,
+    counting each pair once); a region with one droplet meets nobody even where its shear is unknown (NaN)."""
+    from analysis.band_efficiency import region_shear_rates
+
+    d = np.array([0.6e-3] * 7 + [0.9e-3])
+    band = np.array([0] * 7 + [1])
+    under = np.array([True] * 7 + [False])
+    shear = np.array([[3.0, 0.5], [0.2, np.nan]])
+    volumes = np.array([[2e-6, 6e-6], [2e-6, 6e-6]])
+    rates = region_shear_rates(band, under, d, shear, volumes)
+    assert rates[0, 0] == pytest.approx(4.0 / 3.0 * 3.0 * (0.6e-3) ** 3 * 7 * 6 / 2 / 2e-6, rel=1e-12)
+    assert rates[1, 1] == 0.0 and rates[0, 1] == 0.0 and rates[1, 0] == 0.0
+
+
 def test_shear_pair_sums_match_the_pairwise_sum():
     from analysis.band_efficiency import shear_pair_sums
 
@@ -248,3 +264,14 @@ def test_shear_rate_and_volume_held_at_the_droplets_band_by_band():
     held = expected > 0
     assert rate[held] == pytest.approx(np.full(held.sum(), 2.0), rel=1e-9)
     assert np.isnan(rate[~held]).all()
+    # well mixed and sheared at G = 2 1/s: (4/3) G sum over each region's pairs of (a_i + a_j)^3 / V_region, over
+    # the 1 s window; the lone droplet under the inlet in the bottom band meets nobody
+    a = 0.5 * droplets["diameter"].to_numpy()
+    inlet_area = math.pi * (0.5 * g.inlet_diameter) ** 2
+    band_height = g.height / PROFILE_BANDS
+    pairs_top = (a[0] + a[1]) ** 3 + (a[0] + a[2]) ** 3 + (a[1] + a[2]) ** 3
+    mixed = table[["mixed_shear_under_inlet", "mixed_shear_elsewhere"]].to_numpy()
+    assert mixed[-1, 0] == pytest.approx(4.0 / 3.0 * 2.0 * pairs_top / (band_height * inlet_area), rel=1e-9)
+    assert mixed[0, 1] == pytest.approx(4.0 / 3.0 * 2.0 * (a[3] + a[4]) ** 3
+                                        / (band_height * (g.width * g.depth - inlet_area)), rel=1e-9)
+    assert mixed[0, 0] == 0.0 and (mixed[1:-1] == 0.0).all()
