@@ -87,7 +87,7 @@ SINGULAR_RATIO_LIMIT = 1e-3
 
 #: The closure sets of ``--closures`` (analysis.calibration.hierarchy.CLOSURES, not imported here so that the command
 #: line starts without the calibration package; a test holds the two equal).
-CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy")
+CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy", "zones")
 
 
 class CalibrationError(ValueError):
@@ -588,8 +588,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(with popbal's roof and bottom layers: the roof law from the zone diagnostics, the "
                              "bottom layer's thickness factor fitted in place of the return flow), 'busy' "
                              "('designed' with popbal.busy_partners: one merge at a time per droplet, each taking the "
-                             "full engine's growth time) or 'layers_busy' (both); analysis.calibration.hierarchy.CLOSURES; "
-                             "default designed")
+                             "full engine's growth time), 'layers_busy' (both) or 'zones' ('layers' with the "
+                             "confined plume and the roof layer's own efficiency and shear measured in the whole "
+                             "runs' roof); analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
                              "no bands, the errors only)")

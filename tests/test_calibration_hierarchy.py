@@ -401,3 +401,62 @@ def test_roof_coefficient_from_zones_counts_the_slag_that_flows_through_the_roof
     zones.to_csv(folder / "zones.csv", index=False)
     with pytest.raises(ValueError, match="carried by the slag feed alone"):
         roof_from_zones(["cubic"], tmp_path)
+
+
+def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
+    """The 'zones' closures' roof kernel, by hand from two stand-in tables: the top band's merges under the inlet over
+    its well-mixed gravitational plus shear collisions (E_L), and its shear rate times its matte volume over the matte
+    fed per second (G t_V); each the geometric mean of the runs. A run whose table predates the well-mixed shear
+    columns is refused by name. The layer written for 'zones' carries both, and the confinement switch with its own
+    note."""
+    import shutil
+    import tomllib
+    from pathlib import Path
+
+    from analysis.band_efficiency import COLLISIONS_FILE, COLLISIONS_UNITS
+    from analysis.calibration.hierarchy import roof_kernel_from_collisions
+    from settler.cases import load_case
+    from settler.output import units_line
+
+    root = Path(__file__).resolve().parents[1]
+    case = load_case(root / "data" / "reference" / "demo" / "case.toml")
+    q = case.feed.mass_rate / case.matte.density  # matte fed [m^3/s]
+    given = {"a": (900.0, 300.0, 200.0, 1.5, 2.0e-6), "b": (400.0, 100.0, 60.0, 0.8, 1.0e-6)}
+    for name, (merges, gravitational, shear, rate, volume) in given.items():
+        folder = tmp_path / name
+        folder.mkdir()
+        shutil.copy(root / "data" / "reference" / "demo" / "case.toml", folder / "case.toml")
+        rows = pd.DataFrame({column: [1.0, 1.0] for column in COLLISIONS_UNITS})
+        rows["z"] = [0.005, 0.095]  # the second row is the top band
+        rows.loc[1, ["merges_under_inlet", "mixed_under_inlet", "mixed_shear_under_inlet", "shear_rate_under_inlet",
+                     "volume_under_inlet"]] = [merges, gravitational, shear, rate, volume]
+        header = (units_line(COLLISIONS_UNITS)
+                  + "# window: 10.0 20.0 s; cell: 0.005 m; rate_scatter: 0.01; snapshots: 10.0 20.0\n")
+        (folder / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
+    got = roof_kernel_from_collisions(["a", "b"], tmp_path)
+    e = {n: m / (g + s) for n, (m, g, s, _, _) in given.items()}
+    c = {n: r * v / q for n, (_, _, _, r, v) in given.items()}
+    assert got["per_run"]["a"]["efficiency"] == pytest.approx(e["a"], rel=1e-12)  # 900 / 500 = 1.8
+    assert got["efficiency"] == pytest.approx(math.sqrt(e["a"] * e["b"]), rel=1e-12)
+    assert got["shear_coefficient"] == pytest.approx(math.sqrt(c["a"] * c["b"]), rel=1e-12)
+
+    old = pd.read_csv(tmp_path / "b" / COLLISIONS_FILE, comment="#").drop(columns=["mixed_shear_under_inlet"])
+    text = (tmp_path / "b" / COLLISIONS_FILE).read_text().splitlines(keepends=True)
+    (tmp_path / "b" / COLLISIONS_FILE).write_text("".join(text[:2]) + old.to_csv(index=False))
+    with pytest.raises(FileNotFoundError, match="b/collisions_by_height.csv: no well-mixed shear"):
+        roof_kernel_from_collisions(["a", "b"], tmp_path)
+
+    from analysis.calibration.layer import write_layer
+
+    truth = {"channel_coefficient": 0.4, "shear_coefficient": 1.5}
+    targets = _targets(_linear, truth, COVARIATES, np.random.default_rng(1))
+    fit = fit_level("whole", targets, {}, list(truth), {"channel_coefficient": 1.0, "shear_coefficient": 1.0},
+                    model=_linear, progress=False)
+    zones = _hierarchy(fit)
+    zones.closures = "zones"
+    zones.roof = {"coefficient": 0.034, "thickness": 0.01, "per_run": {"a": 0.034}, "runs": ["a"], "kernel": got}
+    layer = tomllib.loads(write_layer(zones, tmp_path / "zones.toml", tmp_path / "holdouts.toml", "x").read_text())
+    assert layer["popbal"]["roof_collision_efficiency"] == pytest.approx(got["efficiency"])
+    assert layer["popbal"]["roof_shear_coefficient"] == pytest.approx(got["shear_coefficient"])
+    assert layer["popbal"]["confinement"] is True
+    assert "confined plume" in (tmp_path / "zones.toml").read_text()

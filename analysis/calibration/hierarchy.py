@@ -44,11 +44,20 @@ LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "return_flow_ratio"),
 #: 'layers_busy' is 'layers' with the same switch: the roof where the full runs hold half their droplets, and
 #: one partner at a time where popbal's channel otherwise grows collectors.
 LAYER_LEVELS = {"transport": ("channel_coefficient", "bottom_layer_factor"), "whole": ("shear_coefficient",)}
+#: 'zones' is 'layers' with the confined plume (popbal.confinement: the plume coefficient from the column-to-plume
+#: radius, as the width family spans it) and the roof layer's own kernel measured in the whole runs' roof, not fitted
+#: (:func:`roof_kernel_from_collisions`: its merges over its collisions well mixed, and its shear over its residence
+#: time), where 'layers' gives the roof the channel's efficiency and shear coefficient.
 BUSY = {"popbal.busy_partners": True}
+CONFINED = {"popbal.confinement": True}
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers": {"levels": LAYER_LEVELS, "layers": True},
             "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": BUSY},
-            "layers_busy": {"levels": LAYER_LEVELS, "layers": True, "switches": BUSY}}
+            "layers_busy": {"levels": LAYER_LEVELS, "layers": True, "switches": BUSY},
+            "zones": {"levels": LAYER_LEVELS, "layers": True, "switches": CONFINED, "roof_kernel": True}}
+#: What each switch of a closure set stands for (the layer's comment on it).
+SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time merging, not fitted",
+                "popbal.confinement": "the confined plume's coefficient and return flow (popbal.closures), not fitted"}
 START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
          "bottom_layer_factor": 1.0}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
@@ -88,6 +97,12 @@ class Hierarchy:
             lines.append(f"roof layer from the zone diagnostics: c_L = {self.roof['coefficient']:.4g} (per run "
                          + ", ".join(f"{r} {v:.3g}" for r, v in self.roof["per_run"].items())
                          + f"), thickness {self.roof['thickness'] * 1e3:.3g} mm")
+            if "kernel" in self.roof:
+                k = self.roof["kernel"]
+                lines.append(f"roof kernel from the collisions by height: efficiency {k['efficiency']:.3g}, shear "
+                             f"coefficient {k['shear_coefficient']:.3g} (per run "
+                             + ", ".join(f"{r} {v['efficiency']:.3g} / {v['shear_coefficient']:.3g}"
+                                         for r, v in k["per_run"].items()) + ")")
         for fit in self.levels:
             lines.append(f"level {fit.level}: runs {', '.join(fit.runs)}; chi2 {fit.chi2:.3g} for {fit.residual_count} "
                          f"residuals, discrepancy {fit.discrepancy:.3g}, {fit.evaluations} model runs ({fit.status})")
@@ -187,6 +202,46 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
     return {"coefficient": coefficient, "thickness": float(np.mean(thickness)), "per_run": per_run, "runs": list(runs)}
 
 
+def roof_kernel_from_collisions(runs, reference_dir: str | Path) -> dict:
+    """The roof layer's own kernel [-] from the full runs' collisions by height (``collisions_by_height.csv``, measured
+    over each run's steady window when it was stored; :mod:`analysis.band_efficiency`), in the top band under the
+    inlet: its efficiency E_L = merges / (C_g + C_s), C_g and C_s the collisions of its droplets well mixed there by
+    differential settling and by the slag's shear at them, and its shear coefficient G t_V, t_V = V_L / Q the matte
+    volume held there over the matte fed per second [s] (popbal's roof is sheared at G = roof_shear_coefficient u_L /
+    delta, delta / u_L its residence time). Each the geometric mean over the runs; per run in "per_run". A run
+    without the table, without merges or without the well-mixed shear columns is refused by name."""
+    from analysis.band_efficiency import COLLISIONS_FILE, read_collisions
+    from settler.cases import load_case
+
+    per_run = {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        path = folder / COLLISIONS_FILE
+        if not path.is_file():
+            raise FileNotFoundError(f"{folder}: no {COLLISIONS_FILE} (stored runs measure it when made with "
+                                    "merges_by_height.csv, a04ea13 or later); the roof kernel needs it")
+        table, _ = read_collisions(path)
+        if "mixed_shear_under_inlet" not in table:
+            raise FileNotFoundError(f"{path}: no well-mixed shear collisions (stored before 2026-12-05); store the "
+                                    "run again from its run folder (python -m analysis.reference set)")
+        top = table.iloc[int(np.argmax(table["z"].to_numpy()))]
+        collisions = float(top["mixed_under_inlet"] + top["mixed_shear_under_inlet"])
+        if not (top["merges_under_inlet"] > 0 and collisions > 0):
+            raise ValueError(f"{path}: no merges or no collisions in the top band under the inlet; the roof kernel "
+                             "needs runs with coalescence and a roof")
+        case = load_case(folder / "case.toml")
+        residence = float(top["volume_under_inlet"]) / (case.feed.mass_rate / case.matte.density)
+        per_run[run] = {"efficiency": float(top["merges_under_inlet"]) / collisions,
+                        "shear_coefficient": float(top["shear_rate_under_inlet"]) * residence,
+                        "residence_time": residence, "shear_rate": float(top["shear_rate_under_inlet"])}
+
+    def mean(key):
+        return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
+
+    return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
+            "runs": list(runs)}
+
+
 def _stored(runs, reference_dir) -> tuple[list[str], list[str]]:
     root = Path(reference_dir)
     have = [r for r in runs if (root / r / "timeseries.csv").is_file()]
@@ -201,6 +256,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     if closures not in CLOSURES:
         raise ValueError(f"closures {closures!r}: allowed {', '.join(CLOSURES)}")
     from analysis.kernel_run import kernel_run_efficiency
+    from settler.cases import load_case
 
     seed = seed_scatter(reference_dir)
     missing: dict[str, list[str]] = {}
@@ -220,6 +276,14 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     if CLOSURES[closures]["layers"]:
         roof = roof_from_zones(transport_runs, reference_dir)
         fixed.update({"popbal.roof_layer_coefficient": roof["coefficient"], "popbal.roof_thickness": roof["thickness"]})
+    if CLOSURES[closures].get("roof_kernel"):
+        # measured in the whole level's runs (their roofs merge; the transport runs' do not), never in a hold-out
+        whole_runs = [r for r in _stored(registry.levels.get("whole", ()), reference_dir)[0]
+                      if load_case(Path(reference_dir) / r / "case.toml").coalescence.enabled]
+        refuse_holdouts(whole_runs, registry, "the roof kernel")
+        roof["kernel"] = roof_kernel_from_collisions(whole_runs, reference_dir)
+        fixed.update({"popbal.roof_collision_efficiency": roof["kernel"]["efficiency"],
+                      "popbal.roof_shear_coefficient": roof["kernel"]["shear_coefficient"]})
     levels = []
     for level in ("transport", "whole"):
         if level == "transport":

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from settler.output import OutputError, atomic_write_text, source_commit
 
-from .hierarchy import CLOSURES, FORM, TARGETS, Hierarchy
+from .hierarchy import CLOSURES, FORM, SWITCH_NOTES, TARGETS, Hierarchy
 
 
 def _q(text) -> str:
@@ -69,6 +69,13 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
                   f"j mu / (drho g I^2) over the roof layers of {', '.join(r['runs'])} (zones.csv)",
                   f"roof_thickness = {r['thickness']!r}  # m [derived] the mean roof thickness of "
                   f"{', '.join(r['runs'])}"]
+        if "kernel" in r:
+            k = r["kernel"]
+            lines += [f"roof_collision_efficiency = {k['efficiency']!r}  # - [derived] the geometric mean of the "
+                      "top band's merges under the inlet over its well-mixed collisions in "
+                      f"{', '.join(k['runs'])} (collisions_by_height.csv)",
+                      f"roof_shear_coefficient = {k['shear_coefficient']!r}  # - [derived] the geometric mean of "
+                      f"the shear rate there times its matte over the feed in {', '.join(k['runs'])}"]
     for fit in result.levels:
         for name in fit.parameters:
             lines.append(f"{name} = {fit.estimates[name]!r}  # - [derived] level {fit.level}: fit to "
@@ -77,7 +84,7 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
         lines.append(f"{key.split('.', 1)[1]} = {_q(value)}  # [chosen] the closure form of every level")
     for key, value in CLOSURES[result.closures].get("switches", {}).items():
         lines.append(f"{key.split('.', 1)[1]} = {str(value).lower()}  # [chosen] closures = {result.closures!r}: "
-                     "the full engine's one-partner-at-a-time merging, not fitted")
+                     f"{SWITCH_NOTES[key]}")
     lines += ["", "[provenance]", f"command = {_q(command or 'settler calibrate --set')}",
               f"code_commit = {_q(commit['commit'])}", f"code_tree_dirty = {str(bool(commit['dirty'])).lower()}",
               f"date = {_q(datetime.date.today().isoformat())}", f"registry = {_q(_portable(registry_path))}",
