@@ -24,6 +24,11 @@ ROOT = Path(__file__).resolve().parents[1]
 SETS = [folder for folder in (ROOT / "data" / "reference", ROOT / "data" / "reference_remake")
         if (folder / "engines.toml").is_file()]
 STORED = sorted((p.parent for s in SETS for p in s.glob("*/reference.json")), key=lambda p: (p.parent.name, p.name))
+
+
+def _run_id(folder: Path) -> str:
+    """A stored run's test id: its name, and its set's where it is not data/reference (a remade run of one name)."""
+    return folder.name if folder.parent.name == "reference" else f"{folder.parent.name}/{folder.name}"
 #: Runs made by an older engine, kept until their regeneration is stored (data/reference/README.md lists them).
 AWAITING_REGENERATION: set[str] = set()
 #: Strings that would name a machine's folders.
@@ -38,14 +43,14 @@ def _info(folder: Path) -> dict:
     return json.loads((folder / "reference.json").read_text())
 
 
-@pytest.mark.parametrize("folder", STORED, ids=lambda p: p.name)
+@pytest.mark.parametrize("folder", STORED, ids=_run_id)
 def test_a_stored_run_loads_and_conserves_matte(folder):
     run = load_run(folder)
     assert run.is_reference and run.engine == "fulldem" and len(run.timeseries) > 10
     assert np.nanmax(np.abs(run.timeseries["mass_balance_error"])) < MASS_TOLERANCE
 
 
-@pytest.mark.parametrize("folder", [f for f in STORED if f.name not in AWAITING_REGENERATION], ids=lambda p: p.name)
+@pytest.mark.parametrize("folder", [f for f in STORED if f.name not in AWAITING_REGENERATION], ids=_run_id)
 def test_provenance_names_command_commit_seed_and_a_clean_tree(folder):
     info = _info(folder)
     assert info["command"] == ("settler sweep --set data/reference/design.toml --engine full --only " + folder.name)
@@ -57,7 +62,7 @@ def test_provenance_names_command_commit_seed_and_a_clean_tree(folder):
         assert not MACHINE_PATHS.search(text), text[:200]
 
 
-@pytest.mark.parametrize("folder", STORED, ids=lambda p: p.name)
+@pytest.mark.parametrize("folder", STORED, ids=_run_id)
 def test_settler_figures_renders_every_stored_run(folder, tmp_path):
     """`settler figures` draws every figure of every stored run (the reference-run issue's "settler figures
     renders every stored run"), each a non-empty PNG; only a run stored without droplet snapshots (the seed
