@@ -128,9 +128,10 @@ def region_shear_rates(band, under_inlet, diameter, shear_rate, volumes) -> np.n
     rates = np.zeros(volumes.shape)
     key = 2 * np.asarray(band, dtype=np.int64) + np.where(under_inlet, 0, 1)
     keys, sums = shear_pair_sums(key, diameter)
+    _, count = np.unique(key, return_counts=True)  # the same sorted keys
+    keys, sums = keys[count > 1], sums[count > 1]  # a lone droplet meets nobody, whatever the shear
     flat = rates.reshape(-1)
     flat[keys] = (4.0 / 3.0) * np.asarray(shear_rate, dtype=float).reshape(-1)[keys] * sums / volumes.reshape(-1)[keys]
-    flat[keys[sums == 0.0]] = 0.0  # a lone droplet meets nobody, whatever the shear
     return rates
 
 

@@ -404,11 +404,14 @@ def test_roof_coefficient_from_zones_counts_the_slag_that_flows_through_the_roof
 
 
 def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
-    """The 'zones' closures' roof kernel, by hand from two stand-in tables: the top band's merges under the inlet over
-    its well-mixed gravitational plus shear collisions (E_L), and its shear rate times its matte volume over the matte
-    fed per second (G t_V); each the geometric mean of the runs. A run whose table predates the well-mixed shear
-    columns is refused by name. The layer written for 'zones' carries both, and the confinement switch with its own
-    note."""
+    """The 'zones' closures' roof kernel, by hand from two stand-in runs (the demo's case, no slag feed): each a top
+    band under the inlet (merges M, well-mixed collisions C_g + C_s, shear rate G, matte V_b) and a roof in zones.csv
+    (thickness delta, volume fraction phi over the window; rows outside it ignored). The layer holds f = I A / V_b of
+    the band's matte (I = delta phi, A the inlet disk), so its collisions mixed over A delta are (C_g + C_s) f^2 h_b /
+    delta and E_L = M over them; its drainage velocity is u_L = j delta / I (j the matte fed over A), and the shear
+    coefficient G delta / u_L; each the geometric mean of the runs. A table without the well-mixed shear columns and
+    an empty list of runs are refused. The layer written for 'zones' carries both, and the confinement switch with
+    its own note."""
     import shutil
     import tomllib
     from pathlib import Path
@@ -420,23 +423,34 @@ def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
 
     root = Path(__file__).resolve().parents[1]
     case = load_case(root / "data" / "reference" / "demo" / "case.toml")
-    q = case.feed.mass_rate / case.matte.density  # matte fed [m^3/s]
-    given = {"a": (900.0, 300.0, 200.0, 1.5, 2.0e-6), "b": (400.0, 100.0, 60.0, 0.8, 1.0e-6)}
-    for name, (merges, gravitational, shear, rate, volume) in given.items():
+    assert case.slag.feed_rate == 0.0
+    area = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
+    j = case.feed.mass_rate / case.matte.density / area  # matte fed over the inlet disk [m/s]
+    h_b = case.geometry.height / 2  # two bands in the stand-in tables
+    # M, C_g, C_s, G [1/s], V_b [m^3], delta [m], phi [-]
+    given = {"a": (900.0, 300.0, 200.0, 1.5, 2.0e-5, 0.005, 0.3), "b": (400.0, 100.0, 60.0, 0.8, 1.0e-5, 0.008, 0.1)}
+    for name, (merges, gravitational, shear, rate, volume, delta, phi) in given.items():
         folder = tmp_path / name
         folder.mkdir()
         shutil.copy(root / "data" / "reference" / "demo" / "case.toml", folder / "case.toml")
         rows = pd.DataFrame({column: [1.0, 1.0] for column in COLLISIONS_UNITS})
-        rows["z"] = [0.005, 0.095]  # the second row is the top band
+        rows["z"] = [0.025, 0.075]  # the second row is the top band
         rows.loc[1, ["merges_under_inlet", "mixed_under_inlet", "mixed_shear_under_inlet", "shear_rate_under_inlet",
                      "volume_under_inlet"]] = [merges, gravitational, shear, rate, volume]
         header = (units_line(COLLISIONS_UNITS)
                   + "# window: 10.0 20.0 s; cell: 0.005 m; rate_scatter: 0.01; snapshots: 10.0 20.0\n")
         (folder / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
+        pd.DataFrame({"time": [5.0, 10.0, 15.0, 20.0], "roof_thickness": [0.02, delta, delta, delta],
+                      "roof_volume_fraction": [0.9, phi, phi, phi], "roof_peak_fraction": 0.0, "rising_count": 0.0,
+                      "rising_volume": 0.0}).to_csv(folder / "zones.csv", index=False)
     got = roof_kernel_from_collisions(["a", "b"], tmp_path)
-    e = {n: m / (g + s) for n, (m, g, s, _, _) in given.items()}
-    c = {n: r * v / q for n, (_, _, _, r, v) in given.items()}
-    assert got["per_run"]["a"]["efficiency"] == pytest.approx(e["a"], rel=1e-12)  # 900 / 500 = 1.8
+    e, c = {}, {}
+    for name, (merges, gravitational, shear, rate, volume, delta, phi) in given.items():
+        share = min(delta * phi * area / volume, 1.0)
+        e[name] = merges / ((gravitational + shear) * share**2 * h_b / delta)
+        c[name] = rate * delta / (j * delta / (delta * phi))
+        assert got["per_run"][name]["share"] == pytest.approx(share, rel=1e-12) and 0.3 < share < 0.4
+    assert got["per_run"]["a"]["efficiency"] == pytest.approx(e["a"], rel=1e-12)
     assert got["efficiency"] == pytest.approx(math.sqrt(e["a"] * e["b"]), rel=1e-12)
     assert got["shear_coefficient"] == pytest.approx(math.sqrt(c["a"] * c["b"]), rel=1e-12)
 
@@ -445,6 +459,8 @@ def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
     (tmp_path / "b" / COLLISIONS_FILE).write_text("".join(text[:2]) + old.to_csv(index=False))
     with pytest.raises(FileNotFoundError, match="b/collisions_by_height.csv: no well-mixed shear"):
         roof_kernel_from_collisions(["a", "b"], tmp_path)
+    with pytest.raises(ValueError, match="needs at least one run"):
+        roof_kernel_from_collisions([], tmp_path)
 
     from analysis.calibration.layer import write_layer
 

@@ -94,6 +94,7 @@ def test_every_regenerated_run_ran_one_engine(set_folder):
     keys = ("fulldem", "popbal", "settler")
     on_set = 0
     runs = [f for f in STORED if f.parent == set_folder]
+    assert runs, f"{set_folder.name}: an engines.toml and no stored run"
     for folder in runs:
         if folder.name in AWAITING_REGENERATION:
             continue
@@ -118,7 +119,7 @@ STORAGE_LIMIT = 40_000_000
 def test_the_reference_set_stays_within_its_storage_budget(folder):
     """Each set within the budget: the remake is to replace the stored set whole."""
     total = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
-    assert total <= STORAGE_LIMIT, f"data/reference holds {total / 1e6:.2f} MB, over {STORAGE_LIMIT / 1e6:g} MB"
+    assert total <= STORAGE_LIMIT, f"data/{folder.name} holds {total / 1e6:.2f} MB, over {STORAGE_LIMIT / 1e6:g} MB"
 
 
 def _git(*args):

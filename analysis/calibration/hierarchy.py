@@ -22,6 +22,7 @@ parameter distribution and discrepancy (:mod:`analysis.calibration.bands`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -203,16 +204,32 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
 
 
 def roof_kernel_from_collisions(runs, reference_dir: str | Path) -> dict:
-    """The roof layer's own kernel [-] from the full runs' collisions by height (``collisions_by_height.csv``, measured
-    over each run's steady window when it was stored; :mod:`analysis.band_efficiency`), in the top band under the
-    inlet: its efficiency E_L = merges / (C_g + C_s), C_g and C_s the collisions of its droplets well mixed there by
-    differential settling and by the slag's shear at them, and its shear coefficient G t_V, t_V = V_L / Q the matte
-    volume held there over the matte fed per second [s] (popbal's roof is sheared at G = roof_shear_coefficient u_L /
-    delta, delta / u_L its residence time). Each the geometric mean over the runs; per run in "per_run". A run
-    without the table, without merges or without the well-mixed shear columns is refused by name."""
+    """The roof layer's own kernel [-] as popbal's roof applies it, from each full run's zone diagnostics over the
+    window of its collisions by height (``collisions_by_height.csv``, measured over the steady window when the run
+    was stored; :mod:`analysis.band_efficiency`), in the top band under the inlet (the disk of area A):
+
+    - the layer, as popbal's: thickness delta and matte per unit area I, the means of ``zones.csv``'s roof_thickness
+      and roof_thickness x roof_volume_fraction over the window (as :func:`roof_from_zones`), so that the layer holds
+      the share f = I A / V_b of the band's matte V_b (at most 1; the rest is plume below it);
+    - efficiency E_L = merges / C_L, with C_L = (C_g + C_s) f^2 h_b / delta the band's well-mixed gravitational and
+      shear collisions (the latter at the slag's shear rate at its droplets) carried over to the layer's droplets mixed
+      over its own volume A delta (a pair sum scales as the droplets squared, at the band's size distribution) from
+      the band's A h_b (h_b the band's height): popbal's roof collides its droplets mixed over A delta;
+    - shear coefficient G delta / u_L, G the slag's shear rate at the band's droplets and u_L = j delta / I - w the
+      layer's own drainage velocity from its balance j = (I / delta) (u_L + w) (j the matte fed over the inlet, w the
+      slag feed's velocity through it; popbal.closures): popbal shears its roof at G = roof_shear_coefficient u_L /
+      delta.
+
+    Each the geometric mean over the runs; per run in "per_run". A run without the table, without the well-mixed
+    shear columns, without merges or shear in its top band, or whose roof the slag alone would carry is refused by
+    name, and so is an empty list of runs."""
     from analysis.band_efficiency import COLLISIONS_FILE, read_collisions
+    from popbal.model import roof_slag_velocity
     from settler.cases import load_case
 
+    if not runs:
+        raise ValueError("the roof kernel needs at least one run with coalescence and a roof among the whole level's "
+                         "stored runs; none is stored")
     per_run = {}
     for run in runs:
         folder = Path(reference_dir) / run
@@ -220,20 +237,37 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path) -> dict:
         if not path.is_file():
             raise FileNotFoundError(f"{folder}: no {COLLISIONS_FILE} (stored runs measure it when made with "
                                     "merges_by_height.csv, a04ea13 or later); the roof kernel needs it")
-        table, _ = read_collisions(path)
+        table, meta = read_collisions(path)
         if "mixed_shear_under_inlet" not in table:
             raise FileNotFoundError(f"{path}: no well-mixed shear collisions (stored before 2026-12-05); store the "
                                     "run again from its run folder (python -m analysis.reference set)")
         top = table.iloc[int(np.argmax(table["z"].to_numpy()))]
-        collisions = float(top["mixed_under_inlet"] + top["mixed_shear_under_inlet"])
-        if not (top["merges_under_inlet"] > 0 and collisions > 0):
+        if not math.isfinite(top["mixed_shear_under_inlet"]) or not math.isfinite(top["shear_rate_under_inlet"]):
+            raise ValueError(f"{path}: no slag shear rate in the top band under the inlet (measured without the whole "
+                             "slag grid); the roof kernel needs it")
+        if not (top["merges_under_inlet"] > 0 and top["mixed_under_inlet"] + top["mixed_shear_under_inlet"] > 0):
             raise ValueError(f"{path}: no merges or no collisions in the top band under the inlet; the roof kernel "
                              "needs runs with coalescence and a roof")
         case = load_case(folder / "case.toml")
-        residence = float(top["volume_under_inlet"]) / (case.feed.mass_rate / case.matte.density)
+        zones = pd.read_csv(folder / "zones.csv", comment="#")
+        start, end = meta["window"]
+        rows = zones[(zones["time"] >= start) & (zones["time"] <= end)]
+        thickness = float(rows["roof_thickness"].mean())
+        inventory = float((rows["roof_thickness"] * rows["roof_volume_fraction"].fillna(0.0)).mean())
+        area = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
+        band = case.geometry.height / len(table)
+        share = min(inventory * area / float(top["volume_under_inlet"]), 1.0)
+        collisions = float(top["mixed_under_inlet"] + top["mixed_shear_under_inlet"]) * share**2 * band / thickness
+        flux = case.feed.mass_rate / case.matte.density / area
+        slag = roof_slag_velocity(case, roof=True, horizontal=case.popbal.slag_flow == "horizontal")
+        drainage = flux * thickness / inventory - slag
+        if not drainage > 0.0:
+            raise ValueError(f"{folder}: its roof layer (matte {inventory:.3g} m per unit area, {thickness:.3g} m "
+                             f"thick) is carried by the slag feed alone; no drainage velocity to scale its shear by")
+        rate = float(top["shear_rate_under_inlet"])
         per_run[run] = {"efficiency": float(top["merges_under_inlet"]) / collisions,
-                        "shear_coefficient": float(top["shear_rate_under_inlet"]) * residence,
-                        "residence_time": residence, "shear_rate": float(top["shear_rate_under_inlet"])}
+                        "shear_coefficient": rate * thickness / drainage, "shear_rate": rate,
+                        "thickness": thickness, "share": share, "drainage_velocity": drainage}
 
     def mean(key):
         return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
