@@ -453,6 +453,12 @@ def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
     assert got["per_run"]["a"]["efficiency"] == pytest.approx(e["a"], rel=1e-12)
     assert got["efficiency"] == pytest.approx(math.sqrt(e["a"] * e["b"]), rel=1e-12)
     assert got["shear_coefficient"] == pytest.approx(math.sqrt(c["a"] * c["b"]), rel=1e-12)
+    # at popbal's thickness delta_p instead of each run's own: collisions x delta / delta_p, u_L = j delta_p / I
+    fixed = roof_kernel_from_collisions(["a"], tmp_path, thickness=0.01)
+    merges, gravitational, shear, rate, volume, delta, phi = given["a"]
+    share = delta * phi * area / volume
+    assert fixed["efficiency"] == pytest.approx(merges / ((gravitational + shear) * share**2 * h_b / 0.01), rel=1e-12)
+    assert fixed["shear_coefficient"] == pytest.approx(rate * 0.01 / (j * 0.01 / (delta * phi)), rel=1e-12)
 
     old = pd.read_csv(tmp_path / "b" / COLLISIONS_FILE, comment="#").drop(columns=["mixed_shear_under_inlet"])
     text = (tmp_path / "b" / COLLISIONS_FILE).read_text().splitlines(keepends=True)

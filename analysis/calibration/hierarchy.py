@@ -203,14 +203,16 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
     return {"coefficient": coefficient, "thickness": float(np.mean(thickness)), "per_run": per_run, "runs": list(runs)}
 
 
-def roof_kernel_from_collisions(runs, reference_dir: str | Path) -> dict:
+def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: float | None = None) -> dict:
     """The roof layer's own kernel [-] as popbal's roof applies it, from each full run's zone diagnostics over the
     window of its collisions by height (``collisions_by_height.csv``, measured over the steady window when the run
     was stored; :mod:`analysis.band_efficiency`), in the top band under the inlet (the disk of area A):
 
-    - the layer, as popbal's: thickness delta and matte per unit area I, the means of ``zones.csv``'s roof_thickness
-      and roof_thickness x roof_volume_fraction over the window (as :func:`roof_from_zones`), so that the layer holds
-      the share f = I A / V_b of the band's matte V_b (at most 1; the rest is plume below it);
+    - the layer, as popbal's: matte per unit area I, the mean of ``zones.csv``'s roof_thickness x
+      roof_volume_fraction over the window (as :func:`roof_from_zones`), so that the layer holds the share
+      f = I A / V_b of the band's matte V_b (at most 1; the rest is plume below it), over popbal's thickness delta
+      (``thickness`` [m], the one popbal's roof will have: the calibration passes the layers' delta; None: each
+      run's own mean roof_thickness), so that popbal's roof holding the run's I collides and drains as the run's;
     - efficiency E_L = merges / C_L, with C_L = (C_g + C_s) f^2 h_b / delta the band's well-mixed gravitational and
       shear collisions (the latter at the slag's shear rate at its droplets) carried over to the layer's droplets mixed
       over its own volume A delta (a pair sum scales as the droplets squared, at the band's size distribution) from
@@ -252,28 +254,29 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path) -> dict:
         zones = pd.read_csv(folder / "zones.csv", comment="#")
         start, end = meta["window"]
         rows = zones[(zones["time"] >= start) & (zones["time"] <= end)]
-        thickness = float(rows["roof_thickness"].mean())
+        own = float(rows["roof_thickness"].mean())
+        delta = own if thickness is None else float(thickness)
         inventory = float((rows["roof_thickness"] * rows["roof_volume_fraction"].fillna(0.0)).mean())
         area = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
         band = case.geometry.height / len(table)
         share = min(inventory * area / float(top["volume_under_inlet"]), 1.0)
-        collisions = float(top["mixed_under_inlet"] + top["mixed_shear_under_inlet"]) * share**2 * band / thickness
+        collisions = float(top["mixed_under_inlet"] + top["mixed_shear_under_inlet"]) * share**2 * band / delta
         flux = case.feed.mass_rate / case.matte.density / area
         slag = roof_slag_velocity(case, roof=True, horizontal=case.popbal.slag_flow == "horizontal")
-        drainage = flux * thickness / inventory - slag
+        drainage = flux * delta / inventory - slag
         if not drainage > 0.0:
-            raise ValueError(f"{folder}: its roof layer (matte {inventory:.3g} m per unit area, {thickness:.3g} m "
+            raise ValueError(f"{folder}: its roof layer (matte {inventory:.3g} m per unit area, {delta:.3g} m "
                              f"thick) is carried by the slag feed alone; no drainage velocity to scale its shear by")
         rate = float(top["shear_rate_under_inlet"])
         per_run[run] = {"efficiency": float(top["merges_under_inlet"]) / collisions,
-                        "shear_coefficient": rate * thickness / drainage, "shear_rate": rate,
-                        "thickness": thickness, "share": share, "drainage_velocity": drainage}
+                        "shear_coefficient": rate * delta / drainage, "shear_rate": rate, "thickness": own,
+                        "share": share, "drainage_velocity": drainage}
 
     def mean(key):
         return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
 
     return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
-            "runs": list(runs)}
+            "runs": list(runs), "thickness": thickness}
 
 
 def _stored(runs, reference_dir) -> tuple[list[str], list[str]]:
@@ -315,7 +318,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
         whole_runs = [r for r in _stored(registry.levels.get("whole", ()), reference_dir)[0]
                       if load_case(Path(reference_dir) / r / "case.toml").coalescence.enabled]
         refuse_holdouts(whole_runs, registry, "the roof kernel")
-        roof["kernel"] = roof_kernel_from_collisions(whole_runs, reference_dir)
+        roof["kernel"] = roof_kernel_from_collisions(whole_runs, reference_dir, thickness=roof["thickness"])
         fixed.update({"popbal.roof_collision_efficiency": roof["kernel"]["efficiency"],
                       "popbal.roof_shear_coefficient": roof["kernel"]["shear_coefficient"]})
     levels = []

@@ -72,10 +72,11 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
         if "kernel" in r:
             k = r["kernel"]
             lines += [f"roof_collision_efficiency = {k['efficiency']!r}  # - [derived] the geometric mean of the "
-                      "top band's merges under the inlet over its well-mixed collisions in "
-                      f"{', '.join(k['runs'])} (collisions_by_height.csv)",
+                      "top band's merges under the inlet over its well-mixed collisions carried over to the roof "
+                      f"layer at roof_thickness, in {', '.join(k['runs'])} (collisions_by_height.csv, zones.csv)",
                       f"roof_shear_coefficient = {k['shear_coefficient']!r}  # - [derived] the geometric mean of "
-                      f"the shear rate there times its matte over the feed in {', '.join(k['runs'])}"]
+                      f"the shear rate there times roof_thickness over the layer's drainage velocity, in "
+                      f"{', '.join(k['runs'])}"]
     for fit in result.levels:
         for name in fit.parameters:
             lines.append(f"{name} = {fit.estimates[name]!r}  # - [derived] level {fit.level}: fit to "
