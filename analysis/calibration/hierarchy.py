@@ -165,14 +165,21 @@ def radius_factor_from_zones(runs, reference_dir: str | Path) -> dict:
     return {"value": phi ** -0.5, "core_fraction": phi, "runs": list(runs)}
 
 
+def _roof_layer(folder: Path, start: float, end: float) -> tuple[float, float]:
+    """(mean roof thickness delta [m], matte per unit area I = mean(thickness x volume fraction) [m]) of the roof
+    layer in a stored run's ``zones.csv`` over ``start``-``end`` [s]."""
+    zones = pd.read_csv(Path(folder) / "zones.csv", comment="#")
+    rows = zones[(zones["time"] >= start) & (zones["time"] <= end)]
+    return (float(rows["roof_thickness"].mean()),
+            float((rows["roof_thickness"] * rows["roof_volume_fraction"].fillna(0.0)).mean()))
+
+
 def roof_from_zones(runs, reference_dir: str | Path) -> dict:
     """The roof law's c_L [-] and thickness delta [m] from the roof layer of the zone diagnostics (``zones.csv``):
     per run, over its steady window, the matte volume per unit area I = mean(roof_thickness x roof_volume_fraction)
     and c_L = (j - w I / delta) mu / (drho g I^2) (popbal.closures.roof_coefficient, j the matte feed over the inlet
     disk, w the slag feed's velocity through it, delta the run's mean roof thickness); c_L the geometric mean over
     the runs, delta the mean thickness."""
-    import math
-
     from analysis.runs import load_run
     from popbal.closures import roof_coefficient
     from popbal.model import roof_slag_velocity
@@ -183,15 +190,13 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
     per_run, thickness = {}, []
     for run in runs:
         folder = Path(reference_dir) / run
-        zones = pd.read_csv(folder / "zones.csv", comment="#")
         (start, end), _ = window_of(load_run(folder).timeseries)
-        rows = zones[(zones["time"] >= start) & (zones["time"] <= end)]
-        inventory = float((rows["roof_thickness"] * rows["roof_volume_fraction"].fillna(0.0)).mean())
+        mean_thickness, inventory = _roof_layer(folder, start, end)
         case = load_case(folder / "case.toml")
         inlet = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
         flux = case.feed.mass_rate / case.matte.density / inlet
         slag = roof_slag_velocity(case, roof=True, horizontal=case.popbal.slag_flow == "horizontal")
-        thickness.append(float(rows["roof_thickness"].mean()))
+        thickness.append(mean_thickness)
         per_run[run] = roof_coefficient(flux, inventory, case.matte.density - case.slag.density, case.slag_viscosity,
                                         slag_velocity=slag, thickness=thickness[-1])
         if not per_run[run] > 0.0:
@@ -251,12 +256,8 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
             raise ValueError(f"{path}: no merges or no collisions in the top band under the inlet; the roof kernel "
                              "needs runs with coalescence and a roof")
         case = load_case(folder / "case.toml")
-        zones = pd.read_csv(folder / "zones.csv", comment="#")
-        start, end = meta["window"]
-        rows = zones[(zones["time"] >= start) & (zones["time"] <= end)]
-        own = float(rows["roof_thickness"].mean())
+        own, inventory = _roof_layer(folder, *meta["window"])
         delta = own if thickness is None else float(thickness)
-        inventory = float((rows["roof_thickness"] * rows["roof_volume_fraction"].fillna(0.0)).mean())
         area = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
         band = case.geometry.height / len(table)
         share = min(inventory * area / float(top["volume_under_inlet"]), 1.0)
