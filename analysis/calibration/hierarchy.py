@@ -15,7 +15,9 @@
 Each level is a :func:`analysis.calibration.fit.fit_level` (residuals from the runs' own scatter, a discrepancy
 term if the residuals call for one, the identifiability gate). The pre-registered hold-outs
 (:mod:`analysis.calibration.registry`) are refused as fitted runs, and are scored only when every level's gate has
-passed (otherwise the result says so and scores nothing): their relative errors at the estimates, and the share of
+passed and every run the registry names for a level is stored (otherwise the result says why and scores nothing:
+a hold-out is scored once, by the fit on the whole registered set, so a fit on part of it, while runs are still
+being made, never looks at one): their relative errors at the estimates, and the share of
 their window means inside the 90 % prediction bands of :data:`BAND_SAMPLES` popbal runs over the calibration's
 parameter distribution and discrepancy (:mod:`analysis.calibration.bands`).
 """
@@ -119,7 +121,11 @@ class Hierarchy:
         for level, runs in self.missing.items():
             lines.append(f"level {level}: registered but not stored yet: {', '.join(runs)}")
         if self.holdout_errors is None:
-            lines.append("hold-outs: not scored (the identifiability gate did not pass)")
+            why = [] if self.gate_passed else ["the identifiability gate did not pass"]
+            if any(self.missing.values()):
+                why.append("runs the registry names are not stored yet, and a hold-out is scored once, by the fit "
+                           "on the whole set")
+            lines.append(f"hold-outs: not scored ({'; '.join(why)})")
         else:
             lines.append("hold-outs (pre-registered, scored once):")
             lines += _error_rows(self.holdout_errors, TARGETS["holdout"])
@@ -340,7 +346,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
             fixed[f"popbal.{name}"] = fit.estimates[name]
     gate_passed = all(f.gate["passed"] for f in levels) and collision["standard_error"] < 0.5 * collision["efficiency"]
     holdout_errors, coverage_result = None, None
-    if gate_passed:
+    if gate_passed and not any(missing.values()):
         holdout_errors, coverage_result = _score_holdouts(registry, reference_dir, seed, fixed, values, levels,
                                                           band_samples)
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
