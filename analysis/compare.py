@@ -22,7 +22,9 @@ definition, pure and small, for reuse (calibration).
 
 Outputs of the command (all written atomically): ``comparison.csv`` (the side-by-side table, a units line first),
 ``errors.csv`` (per column per window), ``comparison.png`` (one panel per column, both runs, windows shaded) and
-``comparison.json`` (inputs, windows, error definition, skipped columns, units); a short table is printed.
+``comparison.json`` (inputs, windows, error definition, skipped columns, units); a short table is printed. When
+both runs carry ``channel_profile.csv`` and ``merges_by_height.csv``, also ``profiles.csv`` and ``profiles.png``: where
+the droplets are and merge against height over the ``steady`` window (:mod:`analysis.profiles`).
 """
 
 from __future__ import annotations
@@ -458,6 +460,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("reduced", help="the reduced run: the --out folder of 'settler reduced'")
     parser.add_argument("--out", metavar="DIR", required=True,
                         help="folder to write comparison.csv, errors.csv, comparison.png and comparison.json into "
+                             "(and profiles.csv, profiles.png when both runs have height tables) "
                              "(created if missing; a run folder is refused; an earlier comparison there is "
                              "replaced)")
     parser.add_argument("--windows", metavar="LIST", default=None,
@@ -507,8 +510,39 @@ def write_outputs(comparison: Comparison, out: Path, command_line: str | None = 
                                       "from the layer's estimates and covariance, each run times exp(delta z); "
                                       "comparison.csv <column>_band_low/_high per row, errors.csv band_* per window",
                         "summary": band_summary(b)}
+    info["profiles"] = _write_profiles(comparison, out, paths)
     atomic_write_text(paths["comparison.json"], to_json(info) + "\n")
     return paths
+
+
+def _write_profiles(comparison: Comparison, out: Path, paths: dict[str, Path]) -> dict:
+    """``profiles.csv`` and ``profiles.png`` (:mod:`analysis.profiles`) for the ``steady`` window (the last window
+    if none is named so) when both runs carry the height tables; what comparison.json records of them."""
+    from .profiles import PROFILE, has_profiles, profile_comparison, profile_figure, profile_units
+
+    missing = [r.folder for r in (comparison.full, comparison.reduced) if not has_profiles(r)]
+    if missing:
+        return {"skipped": f"no channel_profile.csv and merges_by_height.csv in {', '.join(map(str, missing))}"}
+    window = next((w for w in comparison.windows if w.name == "steady"), comparison.windows[-1])
+    try:
+        table = profile_comparison(comparison.full, comparison.reduced, (window.start, window.end))
+    except ValueError as exc:
+        return {"skipped": str(exc)}
+    units = profile_units()
+    paths["profiles.csv"] = out / "profiles.csv"
+    atomic_write_text(paths["profiles.csv"], "# units: " + ", ".join(f"{c} [{u}]" for c, u in units.items())
+                      + "\n" + table.to_csv(index=False))
+    fig = profile_figure(table, (comparison.full.folder.name + " (full)", comparison.reduced.folder.name + " (reduced)"),
+                         (window.start, window.end))
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    fig.clear()
+    paths["profiles.png"] = out / "profiles.png"
+    atomic_write_bytes(paths["profiles.png"], buffer.getvalue())
+    return {"window": dataclasses.asdict(window), "files": ["profiles.csv", "profiles.png"],
+            "columns": {c: {"unit": u, "meaning": m} for c, (u, m) in PROFILE.items()},
+            "definition": "analysis.profiles: per height band, droplet volume averaged over the window's profile "
+                          "rows, merges between the merges_by_height rows nearest the window's ends over their time"}
 
 
 def _describe(run: Run) -> dict:
@@ -554,6 +588,9 @@ def main(args) -> int:
     print(error_summary(comparison))
     if comparison.band is not None:
         print(band_summary(comparison.band))
+    if "profiles.csv" in paths:
+        from .profiles import profile_summary
+        print(profile_summary(pd.read_csv(paths["profiles.csv"], comment="#")))
     print(f"wrote {', '.join(str(p) for p in paths.values())}")
     return 0
 
