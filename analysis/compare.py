@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import json
 import math
 import re
 import sys
@@ -520,14 +521,19 @@ def _write_profiles(comparison: Comparison, out: Path, paths: dict[str, Path]) -
     if none is named so) when both runs carry the height tables; what comparison.json records of them."""
     from .profiles import PROFILE, has_profiles, profile_comparison, profile_figure, profile_units
 
+    def skipped(reason):
+        for name in ("profiles.csv", "profiles.png"):  # an earlier comparison's, which these runs do not replace
+            (out / name).unlink(missing_ok=True)
+        return {"skipped": reason}
+
     missing = [r.folder for r in (comparison.full, comparison.reduced) if not has_profiles(r)]
     if missing:
-        return {"skipped": f"no channel_profile.csv and merges_by_height.csv in {', '.join(map(str, missing))}"}
+        return skipped(f"no channel_profile.csv and merges_by_height.csv in {', '.join(map(str, missing))}")
     window = next((w for w in comparison.windows if w.name == "steady"), comparison.windows[-1])
     try:
         table = profile_comparison(comparison.full, comparison.reduced, (window.start, window.end))
     except ValueError as exc:
-        return {"skipped": str(exc)}
+        return skipped(str(exc))
     units = profile_units()
     paths["profiles.csv"] = out / "profiles.csv"
     atomic_write_text(paths["profiles.csv"], "# units: " + ", ".join(f"{c} [{u}]" for c, u in units.items())
@@ -540,6 +546,7 @@ def _write_profiles(comparison: Comparison, out: Path, paths: dict[str, Path]) -
     paths["profiles.png"] = out / "profiles.png"
     atomic_write_bytes(paths["profiles.png"], buffer.getvalue())
     return {"window": dataclasses.asdict(window), "files": ["profiles.csv", "profiles.png"],
+            "merge_spans": {side: list(span) for side, span in table.attrs["merge_spans"].items()},
             "columns": {c: {"unit": u, "meaning": m} for c, (u, m) in PROFILE.items()},
             "definition": "analysis.profiles: per height band, droplet volume averaged over the window's profile "
                           "rows, merges between the merges_by_height rows nearest the window's ends over their time"}
@@ -581,6 +588,7 @@ def main(args) -> int:
                   f"not {wanted}", file=sys.stderr)
     out = prepare_output_folder(args.out, option="--out")  # refuses a file, an unwritable folder, a run folder
     paths = write_outputs(comparison, out, getattr(args, "command_line", None))
+    profiles = json.loads(paths["comparison.json"].read_text()).get("profiles", {})
     print(f"{comparison.full.name} ({comparison.full.engine}, {comparison.full.folder}) vs "
           f"{comparison.reduced.name} ({comparison.reduced.engine}, {comparison.reduced.folder}), "
           f"t = {comparison.table['time'].min():g}-{comparison.table['time'].max():g} s, "
@@ -590,7 +598,10 @@ def main(args) -> int:
         print(band_summary(comparison.band))
     if "profiles.csv" in paths:
         from .profiles import profile_summary
-        print(profile_summary(pd.read_csv(paths["profiles.csv"], comment="#")))
+        spans = ", ".join(f"{side} {t0:g}-{t1:g} s" for side, (t0, t1) in profiles["merge_spans"].items())
+        print(profile_summary(pd.read_csv(paths["profiles.csv"], comment="#")) + f"\n(merges over {spans})")
+    elif "skipped" in profiles:
+        print(f"no height profiles: {profiles['skipped']}")
     print(f"wrote {', '.join(str(p) for p in paths.values())}")
     return 0
 

@@ -7,9 +7,10 @@ the count is a sum over heights. Both engines write, in the :data:`settler.outpu
 
 - ``droplet_volume`` [m^3]: the band's droplet volume, the mean over the profile rows in the window (ends
   included);
-- ``merge_rate_under_inlet`` and ``merge_rate_elsewhere`` [1/s]: the merges in the band between the
-  ``merges_by_height`` rows nearest the window's ends, over the time between them
-  (:func:`analysis.band_efficiency.merges_between`).
+- ``merge_rate_under_inlet`` and ``merge_rate_elsewhere`` [1/s]: the merges in the band between the first and the
+  last ``merges_by_height`` rows inside the window (ends included), over the time between them
+  (:func:`analysis.band_efficiency.merges_between`); the two engines write at different intervals (a full run at its
+  snapshots, popbal at its outputs), so each run's span is reported with its profile.
 
 ``settler compare FULL REDUCED --out DIR`` writes them as ``profiles.csv`` and ``profiles.png`` for its ``steady``
 window when both runs carry the two tables (:func:`profile_comparison`, :func:`profile_figure`); the sums over the
@@ -49,22 +50,35 @@ def has_profiles(run) -> bool:
 
 def band_profile(run, window: tuple[float, float]) -> tuple[pd.DataFrame, tuple[float, float]]:
     """The :data:`PROFILE` of ``run`` (an :class:`analysis.runs.Run`) over ``window`` (start, end) [s], and the
-    (t0, t1) [s] of the ``merges_by_height`` rows the merge rates are taken between. ValueError naming the run when
-    a table is missing or the window holds no profile row or no two merge rows."""
+    (t0, t1) [s] of the ``merges_by_height`` rows the merge rates are taken between (both inside the window).
+    ValueError naming the run and the file when a table is missing or empty, or the window holds no profile row or
+    fewer than two merge rows."""
     folder = Path(run.folder)
     missing = [name for name in PROFILE_FILES if not (folder / name).is_file()]
     if missing:
         raise ValueError(f"{folder}: no {', '.join(missing)} (written by both engines since the zone diagnostics; "
                          "an older run lacks them)")
-    profile = read_table(folder / "channel_profile.csv")
+    tables = {name: read_table(folder / name) for name in PROFILE_FILES}
+    for name, table in tables.items():
+        if table.empty:
+            raise ValueError(f"{folder / name}: no rows")
     start, end = window
-    rows = profile[(profile["time"] >= start - 1e-9) & (profile["time"] <= end + 1e-9)]
+
+    def inside(table):
+        return table[(table["time"] >= start - 1e-9) & (table["time"] <= end + 1e-9)]
+
+    rows = inside(tables["channel_profile.csv"])
     if rows.empty:
-        times = profile["time"].to_numpy(dtype=float)
+        times = tables["channel_profile.csv"]["time"].to_numpy(dtype=float)
         raise ValueError(f"{folder}: window {start:g}-{end:g} s holds no channel_profile row (rows at "
                          f"{times.min():g}-{times.max():g} s)")
     volume = rows.groupby("z")["droplet_volume"].mean()
-    t0, t1, merges = merges_between(read_table(folder / "merges_by_height.csv"), window, where=str(folder))
+    merge_rows = inside(tables["merges_by_height.csv"])
+    times = np.unique(merge_rows["time"].to_numpy(dtype=float))
+    if len(times) < 2:
+        raise ValueError(f"{folder}: window {start:g}-{end:g} s holds {len(times)} merges_by_height row time(s); "
+                         "the merge rates need two")
+    t0, t1, merges = merges_between(merge_rows, (times[0], times[-1]), where=str(folder))
     merges = merges.set_index("z")
     if len(merges) != len(volume) or not np.allclose(merges.index, volume.index, rtol=Z_TOLERANCE, atol=0.0):
         raise ValueError(f"{folder}: the bands of channel_profile.csv and merges_by_height.csv differ")
@@ -76,17 +90,20 @@ def band_profile(run, window: tuple[float, float]) -> tuple[pd.DataFrame, tuple[
 
 def profile_comparison(full, reduced, window: tuple[float, float]) -> pd.DataFrame:
     """Both runs' :func:`band_profile` side by side (columns ``z`` and ``<column>_full``, ``<column>_reduced``),
-    top band first. ValueError when their bands differ (different heights or band counts)."""
-    a, _ = band_profile(full, window)
-    b, _ = band_profile(reduced, window)
+    top band first; ``table.attrs["merge_spans"]`` holds each run's (t0, t1) [s]. ValueError when their bands
+    differ (different heights or band counts)."""
+    a, span_a = band_profile(full, window)
+    b, span_b = band_profile(reduced, window)
     if len(a) != len(b) or not np.allclose(a["z"], b["z"], rtol=Z_TOLERANCE, atol=0.0):
-        raise ValueError(f"the runs' height bands differ ({len(a)} bands to {a['z'].max():.4g} m against {len(b)} "
-                         f"to {b['z'].max():.4g} m): not the same case")
+        raise ValueError(f"the runs' height bands differ ({len(a)} bands, top band centred at {a['z'].max():.4g} m, "
+                         f"against {len(b)} at {b['z'].max():.4g} m): not the same case")
     table = pd.DataFrame({"z": a["z"]})
     for column in list(PROFILE)[1:]:
         table[f"{column}_full"] = a[column].to_numpy()
         table[f"{column}_reduced"] = b[column].to_numpy()
-    return table.sort_values("z", ascending=False).reset_index(drop=True)
+    table = table.sort_values("z", ascending=False).reset_index(drop=True)
+    table.attrs["merge_spans"] = {"full": span_a, "reduced": span_b}
+    return table
 
 
 def profile_units() -> dict[str, str]:

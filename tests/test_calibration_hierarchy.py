@@ -497,7 +497,7 @@ def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path,
     for run in ("kernel", "demo_no_coalescence", *stored_whole, "deep"):
         (tmp_path / run).mkdir()
         (tmp_path / run / "timeseries.csv").write_text("time\n0\n")
-    registry = Registry(holdouts=("deep",), why={"deep": "test"}, families={},
+    registry = Registry(holdouts=("deep", "deep_fine"), why={"deep": "test", "deep_fine": "not stored"}, families={},
                         levels={"collision": ("kernel",), "transport": ("demo_no_coalescence",),
                                 "whole": ("demo", "deep_w002")}, path=tmp_path / "holdouts.toml")
 
@@ -518,11 +518,15 @@ def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path,
     monkeypatch.setattr(h, "load_target", lambda run, d, seed: run)
     monkeypatch.setattr(h, "fit_level", fit_level)
     monkeypatch.setattr(h, "_score_holdouts", lambda registry, *a: (read.extend(registry.holdouts) or
-                                                                    ({"deep": {"droplet_count": 0.05}}, None)))
+                                                                    ({"deep": dict.fromkeys(h.TARGET_COLUMNS, 0.05)}, None)))
     result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0)
     assert result.gate_passed
     assert (result.holdout_errors is not None) is scored
-    assert read == (["deep"] if scored else [])
+    assert read == (["deep", "deep_fine"] if scored else [])  # _score_holdouts itself scores the stored ones only
+    assert result.missing["holdouts"] == ["deep_fine"]
+    assert "hold-outs registered but not stored yet (not scored): deep_fine" in result.summary()
     if not scored:
-        assert result.missing == {"whole": ["deep_w002"]}
+        assert result.missing["whole"] == ["deep_w002"]
         assert "not scored (runs the registry names are not stored yet" in result.summary()
+    else:
+        assert "whole" not in result.missing

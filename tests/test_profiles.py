@@ -32,12 +32,13 @@ def reduced_demo(tmp_path_factory):
     return popbal.run(popbal.setup(case), progress=False).save(tmp_path_factory.mktemp("reduced") / "demo")
 
 
-def _check_sums(folder, rtol):
+def _check_sums(folder, rtol, window=WINDOW):
     run = load_run(folder)
-    table, (t0, t1) = band_profile(run, WINDOW)
+    table, (t0, t1) = band_profile(run, window)
+    assert window[0] - 1e-9 <= t0 < t1 <= window[1] + 1e-9  # the merges' span lies inside the window
     series = run.timeseries
     rows = pd.read_csv(Path(folder) / "channel_profile.csv", comment="#")
-    times = np.unique(rows["time"][(rows["time"] >= WINDOW[0]) & (rows["time"] <= WINDOW[1])])
+    times = np.unique(rows["time"][(rows["time"] >= window[0]) & (rows["time"] <= window[1])])
     mass = [series["mass_in_slag"][np.isclose(series["time"], t)].iloc[0] for t in times]
     assert not run.case.reaction.enabled
     assert table["droplet_volume"].sum() * run.case.matte.density == pytest.approx(np.mean(mass), rel=rtol)
@@ -47,15 +48,19 @@ def _check_sums(folder, rtol):
     assert merged > 0.0
 
 
-def test_full_run_band_sums_are_the_time_series_totals():
+@pytest.mark.parametrize("window", [WINDOW, (25.0 - 25.0 / 3.0, 25.0), (16.4, 24.8)])
+def test_full_run_band_sums_are_the_time_series_totals(window):
     """The stored demo: band volumes x 5100 kg/m^3 = mass in the slag, band merges = the time series' merges (the
-    engine counts both per droplet; only the float32 storage differs)."""
-    _check_sums(FULL, rtol=1e-6)
+    engine counts both per droplet; only the float32 storage differs), over windows whose ends fall between its
+    snapshots (1 s apart) as compare's steady window does."""
+    _check_sums(FULL, rtol=1e-6, window=window)
 
 
-def test_reduced_run_band_sums_are_the_time_series_totals(reduced_demo):
-    """popbal's bands hold its zones' droplet volume (channel, outer, roof, bottom) and merges: the same totals."""
-    _check_sums(reduced_demo, rtol=1e-6)
+@pytest.mark.parametrize("window", [WINDOW, (25.0 - 25.0 / 3.0, 25.0), (16.4, 24.8)])
+def test_reduced_run_band_sums_are_the_time_series_totals(reduced_demo, window):
+    """popbal's bands hold its zones' droplet volume (channel, outer, roof, bottom) and merges: the same totals,
+    over the same windows at its own output interval (0.5 s)."""
+    _check_sums(reduced_demo, rtol=1e-6, window=window)
 
 
 def test_comparison_refuses_runs_of_other_bands(tmp_path, reduced_demo):
@@ -83,3 +88,12 @@ def test_settler_compare_writes_the_profiles_of_its_steady_window(tmp_path, redu
     assert (out / "profiles.png").stat().st_size > 10_000
     expected = profile_comparison(load_run(FULL), load_run(reduced_demo), (steady["start"], steady["end"]))
     np.testing.assert_allclose(table.to_numpy(), expected.to_numpy(), rtol=1e-12)
+    assert info["merge_spans"] == {"full": [17.0, 25.0], "reduced": [17.0, 25.0]}  # rows inside 16.67-25 s
+    # a comparison without the tables removes the earlier profiles from the same folder and says why
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    for name in ("timeseries.csv", "case.toml", "metadata.json"):
+        (bare / name).write_bytes((Path(reduced_demo) / name).read_bytes())
+    assert main(["compare", str(FULL), str(bare), "--out", str(out)]) == 0
+    assert "no height profiles: no channel_profile.csv" in capsys.readouterr().out
+    assert not (out / "profiles.csv").exists() and not (out / "profiles.png").exists()

@@ -65,6 +65,9 @@ START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_r
          "bottom_layer_factor": 1.0}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
 FORM = {"popbal.channel_radius_form": "flux"}
+#: Key of :attr:`Hierarchy.missing` for the registered hold-outs not stored (not a level: they do not stop the others
+#: being scored, and are not scored themselves).
+HOLDOUTS_KEY = "holdouts"
 #: The issue's targets: relative error of a window mean, fitted runs and hold-outs.
 TARGETS = {"fitted": 0.10, "holdout": 0.20}
 #: popbal runs per hold-out for its 90 % prediction band.
@@ -119,10 +122,13 @@ class Hierarchy:
             lines.append("  gate: " + ("passed" if fit.gate["passed"] else "FAILED: " + "; ".join(fit.gate["reasons"])))
             lines += _error_rows(fit.errors, TARGETS["fitted"])
         for level, runs in self.missing.items():
-            lines.append(f"level {level}: registered but not stored yet: {', '.join(runs)}")
+            if level == HOLDOUTS_KEY:
+                lines.append(f"hold-outs registered but not stored yet (not scored): {', '.join(runs)}")
+            else:
+                lines.append(f"level {level}: registered but not stored yet: {', '.join(runs)}")
         if self.holdout_errors is None:
             why = [] if self.gate_passed else ["the identifiability gate did not pass"]
-            if any(self.missing.values()):
+            if any(runs for level, runs in self.missing.items() if level != HOLDOUTS_KEY):
                 why.append("runs the registry names are not stored yet, and a hold-out is scored once, by the fit "
                            "on the whole set")
             lines.append(f"hold-outs: not scored ({'; '.join(why)})")
@@ -349,6 +355,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     if gate_passed and not any(missing.values()):
         holdout_errors, coverage_result = _score_holdouts(registry, reference_dir, seed, fixed, values, levels,
                                                           band_samples)
+    missing[HOLDOUTS_KEY] = _stored(registry.holdouts, reference_dir)[1]  # never scored, whatever the fit
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
                      missing={k: v for k, v in missing.items() if v}, coverage=coverage_result, closures=closures,
