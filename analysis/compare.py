@@ -494,11 +494,7 @@ def write_outputs(comparison: Comparison, out: Path, command_line: str | None = 
     atomic_write_text(paths["errors.csv"], "# units: start [s], end [s], points [-], mean_full and mean_reduced "
                       "[unit of the column, comparison.json], relative_error [-]" + band_units + "\n"
                       + comparison.errors.to_csv(index=False))
-    fig = comparison_figure(comparison)
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
-    fig.clear()
-    atomic_write_bytes(paths["comparison.png"], buffer.getvalue())
+    _write_png(comparison_figure(comparison), paths["comparison.png"])
     info = {"command": command_line, "error_definition": ERROR_DEFINITION,
             "full": _describe(comparison.full), "reduced": _describe(comparison.reduced),
             "windows": [dataclasses.asdict(w) for w in comparison.windows], "window_unit": "s",
@@ -538,18 +534,24 @@ def _write_profiles(comparison: Comparison, out: Path, paths: dict[str, Path]) -
     paths["profiles.csv"] = out / "profiles.csv"
     atomic_write_text(paths["profiles.csv"], "# units: " + ", ".join(f"{c} [{u}]" for c, u in units.items())
                       + "\n" + table.to_csv(index=False))
-    fig = profile_figure(table, (comparison.full.folder.name + " (full)", comparison.reduced.folder.name + " (reduced)"),
-                         (window.start, window.end))
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
-    fig.clear()
     paths["profiles.png"] = out / "profiles.png"
-    atomic_write_bytes(paths["profiles.png"], buffer.getvalue())
+    _write_png(profile_figure(table, (f"{comparison.full.folder.name} (full)",
+                                      f"{comparison.reduced.folder.name} (reduced)"), (window.start, window.end)),
+               paths["profiles.png"])
     return {"window": dataclasses.asdict(window), "files": ["profiles.csv", "profiles.png"],
             "merge_spans": {side: list(span) for side, span in table.attrs["merge_spans"].items()},
             "columns": {c: {"unit": u, "meaning": m} for c, (u, m) in PROFILE.items()},
             "definition": "analysis.profiles: per height band, droplet volume averaged over the window's profile "
-                          "rows, merges between the merges_by_height rows nearest the window's ends over their time"}
+                          "rows, merges between the first and last merges_by_height rows inside the window over "
+                          "their time"}
+
+
+def _write_png(fig, path: Path) -> None:
+    """Write a matplotlib figure as a PNG atomically and release it."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    fig.clear()
+    atomic_write_bytes(path, buffer.getvalue())
 
 
 def _describe(run: Run) -> dict:
