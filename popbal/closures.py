@@ -175,6 +175,22 @@ popbal's plume velocity, so the bottom layer's droplets may reach the floor at U
 the plume's droplet velocity (transport x u_s); with coalescence they cross 3-13 times faster, mostly by growing.
 All three are exploratory closures, not yet calibrated (no stored layer sets them).
 
+The bottom layer's lift into the return flow (``bottom_lift_share`` lambda, ``bottom_lift_velocity_ratio`` beta).
+Resolved, the floor does give droplets back. The demo at 2.5 mm cells, continued from its stored 25 s run to 60 s
+at the set's engine (exploratory, 2026-12-06; docs/guide/reduced-model.md), holds 3 800-5 600 droplets in the return
+flow below the roof, a quarter of the mid-column's, against 600-1 100 in the 5 mm runs. Tracked by ident through
+its 1-s snapshots over 35-60 s, of the droplets leaving the bottom tenth of the height 4.5 % go up into the region
+outside 10 mm of the axis and the rest settle or merge: by size 0.136 (below 0.5 mm), 0.087 (0.5-0.6 mm), 0.022
+(0.6-0.7), 0.008 (0.7-0.8), 0.003 (0.8-1.0) and none above 1 mm, whose own settling velocities are 0.15, 0.71,
+1.0, 1.3, 1.9 and above 2.9 mm/s; the slag there rises at 4-5 mm/s at mid-height (the return flow, 0.073 of the
+axis velocity where it rises) and at 0.8-1.0 mm/s 6 mm above the floor. So the droplets slower than the upflow at
+the floor layer's top are carried off it, by size. The closure: of what leaves the bottom layer in a step, section
+k's share lambda exp(-(U_k / u_b)^2) enters the outer zone's bottom cell (where it rises at u_up - U) instead of
+settling, U_k the droplets' own hindered settling velocity and u_b = beta u_up (:func:`lift_share`); lambda and beta
+are to be measured on the resolved runs (about 0.14 and 0.2 on the one above), not fitted. A bottom layer fed at
+the volume rate Q with coalescence off then holds phi U_h(phi) (1 - lambda') = Q / A_box, lambda' the fed size's
+share: each droplet passes lambda' / (1 - lambda') times more (tests/test_popbal_layers.py).
+
 Both layers integrate dc/dt = inflow - (v / h) c exactly over a step (popbal.driver), so their steady states hold
 whatever the step; tests/test_popbal_layers.py checks both against their closed forms (the bottom layer's with and
 without its drainage) and that the roof's own kernel keys scale its merges alone.
@@ -285,6 +301,16 @@ def flux_channel_radius(volume_flux, velocity, radius_factor):
 def transport_factor(reynolds, reynolds_scale=None):
     """Droplet transport velocity / the plume's u_s [-]: 1 / (1 + Re / Re_c); 1 when Re_c is None."""
     return 1.0 / (1.0 + reynolds / reynolds_scale) if reynolds_scale else 1.0
+
+
+def lift_share(settling_velocity, share, lift_velocity):
+    """The share lambda exp(-(U / u_b)^2) [-] of the droplets leaving the bottom layer that the return flow lifts
+    into the outer zone, for their own hindered settling velocity U [m/s], lambda = ``share`` [-] and the upflow at
+    the layer's top u_b = ``lift_velocity`` [m/s] (module docstring, bottom layer's lift); 0 where lambda is 0."""
+    u = np.asarray(settling_velocity, dtype=float)
+    if not share:
+        return np.zeros_like(u)
+    return share * np.exp(-(np.maximum(u, 0.0) / lift_velocity) ** 2)
 
 
 def return_velocity(ratio, plume_velocity):

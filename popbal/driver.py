@@ -39,7 +39,7 @@ from settler.output import (CHANNEL_PROFILE, MERGES_BY_HEIGHT, MID_BAND, atomic_
                             write_time_series)
 
 from . import limits
-from .closures import settling_share
+from .closures import lift_share, settling_share
 from .kernels import (AGE, FES_REMOVED, NEGLIGIBLE_VOLUME_FRACTION, NUMBER, QUANTITIES, cell_properties,
                       coalesce_zone, react_zone, transport_two_way, transport_zone)
 from .model import BOTTOM, CHANNEL, OUTER, ROOF, ZONES, Model, setup
@@ -418,11 +418,19 @@ def _layer_step(content: np.ndarray, inflow: np.ndarray, velocity: np.ndarray, t
 def _bottom_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, dt: float) -> None:
     """The bottom layer over dt (popbal.closures): what left the channel's and the outer zone's bottom during the
     step flows into its one (bottom) cell at a constant rate, and section k drops onto the floor (settles) at its
-    own hindered settling velocity v_k (properties at the step start): :func:`_layer_step`."""
+    own hindered settling velocity v_k (properties at the step start): :func:`_layer_step`. With
+    ``bottom_lift_share`` a share of what leaves goes up into the outer zone's bottom cell instead
+    (:func:`popbal.closures.lift_share`)."""
     volume = model.zone_area[BOTTOM] * model.cell_height
     velocity = np.maximum(work.velocities[BOTTOM, 0], 0.0)
     out = _layer_step(content[BOTTOM, 0], work.into_bottom / (volume * dt), velocity, model.bottom_thickness, dt)
     work.into_bottom[:] = 0.0
+    p = model.parameters
+    if p["bottom_lift"] > 0.0:  # the return flow carries a share of the slow droplets off the floor, by size
+        own = velocity - p["bottom_drain"] * p["plume_velocity"] * p["transport_factor"]
+        lifted = out * lift_share(own, p["bottom_lift"], p["bottom_lift_velocity"])[None, :]
+        content[OUTER, 0] += lifted * volume / (model.zone_area[OUTER] * model.cell_height)
+        out = out - lifted
     books.settled += out * volume
 
 

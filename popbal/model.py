@@ -275,6 +275,8 @@ def build(case: Case) -> Model:
     if p.confinement and ratio > 0.0:  # r multiplies the confined Stokes plume's return share S(R / R_c)
         ratio *= closures.confined_return_share(column_radius(case) / channel_radius)
     return_velocity = closures.return_velocity(ratio, plume_velocity)
+    parameters["bottom_lift"], parameters["bottom_lift_velocity"] = bottom_lift(case, bottom_thickness,
+                                                                                return_velocity)
     return Model(case=case, grid=grid, cells=cells, cell_height=dz, z=z, zone_area=zone_area,
                  channel_radius=channel_radius, inlet_radius=inlet_radius, feed_density=case.matte.density,
                  feed_number_rate=feed_number_rate,
@@ -286,6 +288,30 @@ def build(case: Case) -> Model:
                  parameters=parameters, return_velocity=return_velocity, roof_thickness=p.roof_thickness or 0.0,
                  roof_coefficient=roof_coefficient, roof_radius=roof_radius, bottom_thickness=bottom_thickness,
                  roof_slag_velocity=roof_slag_velocity(case, roof_volume > 0.0, horizontal))
+
+
+def bottom_lift(case: Case, bottom_thickness: float, return_velocity: float) -> tuple[float, float]:
+    """(lambda [-], u_b [m/s]) of the bottom layer's lift into the return flow (popbal.closures,
+    :func:`popbal.closures.lift_share`): ``bottom_lift_share`` and u_b = ``bottom_lift_velocity_ratio`` x u_up; (0, 0)
+    without it. Refuses (CaseError) the keys where the case has no bottom layer or no return flow to lift into, and
+    either key without the other."""
+    p = case.popbal
+    share, ratio = p.bottom_lift_share, p.bottom_lift_velocity_ratio
+    if not share:
+        if ratio is not None:
+            raise CaseError(f"popbal.bottom_lift_velocity_ratio = {ratio!r}: sets the lift of popbal.bottom_lift_share,"
+                            " which is absent or 0; allowed only with it (or leave it out)")
+        return 0.0, 0.0
+    if ratio is None:
+        raise CaseError(f"popbal.bottom_lift_share = {share!r}: needs popbal.bottom_lift_velocity_ratio (a number > 0:"
+                        " the upflow at the bottom layer's top over the return flow's u_up)")
+    if not bottom_thickness > 0.0:
+        raise CaseError(f"popbal.bottom_lift_share = {share!r}: lifts droplets out of a bottom layer this case does not "
+                        "have; allowed only with popbal.bottom_layer_factor (or leave it out)")
+    if not return_velocity > 0.0:
+        raise CaseError(f"popbal.bottom_lift_share = {share!r}: lifts droplets into a return flow this case does not "
+                        "have; allowed only with popbal.return_flow_ratio > 0 (or leave it out)")
+    return float(share), ratio * return_velocity
 
 
 def roof_slag_velocity(case: Case, roof: bool, horizontal: bool) -> float:

@@ -281,6 +281,17 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                                   "droplet velocity (its discharge driving them into the floor; "
                                                   "popbal.closures); absent: their own settling alone.", 0.0,
                                           optional=True),
+        "bottom_lift_share": Field(F, "-", "lambda: of the droplets leaving the bottom layer, the share lambda "
+                                           "exp(-(U / u_b)^2) of those whose own hindered settling velocity is U "
+                                           "goes up into the outer zone's return flow instead of onto the floor, "
+                                           "u_b = bottom_lift_velocity_ratio x u_up the return flow's upflow at the "
+                                           "layer's top (droplets slower than it are carried off the floor, by "
+                                           "size; popbal.closures); needs a bottom layer and a return flow; absent "
+                                           "or 0: none lifted.", 0.0, 1.0, optional=True),
+        "bottom_lift_velocity_ratio": Field(F, "-", "u_b / u_up: the upflow at the bottom layer's top that sets "
+                                                    "which droplets bottom_lift_share lifts, over the outer zone's "
+                                                    "upflow u_up (popbal.closures); needed with bottom_lift_share.",
+                                            0.0, exclusive_minimum=True, optional=True),
         "axis_velocity_ratio": Field(F, "-", "Slag velocity on the channel axis (the channel_velocity output) / the "
                                              "plume velocity u_c that carries the droplets; absent: 1.", 0.0,
                                      exclusive_minimum=True, optional=True),

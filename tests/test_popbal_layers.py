@@ -16,7 +16,7 @@ from scipy.optimize import brentq
 
 import popbal
 from popbal.closures import roof_coefficient, roof_inventory
-from popbal.model import BOTTOM, CHANNEL, ROOF
+from popbal.model import BOTTOM, CHANNEL, OUTER, ROOF
 from settler.cases import CaseError
 from settler.derived import settling_velocity
 from settler.physics import STANDARD_GRAVITY, richardson_zaki_factor
@@ -65,15 +65,18 @@ def test_roof_layer_holds_its_closed_form_volume_fraction(steady):
         == pytest.approx(C_L, rel=1e-12)
 
 
-def _bottom_closed_form(model, push=0.0):
-    """The steady bottom layer's phi with phi (U_h(phi) + push) = Q / A_box: the single fed size's hindered settling
-    plus a drainage velocity push [m/s], solved with brentq independently of the model."""
+def _bottom_closed_form(model, push=0.0, lifted=0.0):
+    """The steady bottom layer's phi with phi (U_h(phi) + push) (1 - lifted) = Q / A_box: the single fed size's
+    hindered settling plus a drainage velocity push [m/s], a share ``lifted`` of what leaves it going back up (so
+    that it passes 1 / (1 - lifted) times the feed), solved with brentq independently of the model."""
     case = model.case
     q = case.feed.mass_rate / case.matte.density
     box = case.geometry.width * case.geometry.depth
     own = settling_velocity(case, case.feed.mean_diameter)
     n = model.parameters["hindered_exponent"]
-    return brentq(lambda phi: phi * (own * richardson_zaki_factor(phi, n) + push) - q / box, 1e-12, 0.5, xtol=1e-15)
+    # the dilute branch: below the volume fraction 1 / (n + 1) of the largest hindered settling flux
+    return brentq(lambda phi: phi * (own * richardson_zaki_factor(phi, n) + push) * (1.0 - lifted) - q / box, 1e-12,
+                  1.0 / (n + 1.0), xtol=1e-15)
 
 
 def test_bottom_layer_holds_its_closed_form_volume_fraction(steady):
@@ -234,3 +237,73 @@ def test_roof_kernel_keys_scale_the_roof_layers_merges_alone():
 def test_layer_kernel_keys_without_their_layer_are_refused(key):
     with pytest.raises(CaseError, match=f"popbal.{key} = 2.0: sets a layer this case does not have"):
         popbal.setup("demo", [f"popbal.{key}=2"])
+
+
+# --- the bottom layer's lift into the return flow (popbal.bottom_lift_share, bottom_lift_velocity_ratio): resolved,
+# the floor gives its slow droplets back to the return flow (popbal.closures)
+
+LIFT = 0.3  # bottom_lift_share [-] (chosen for the test)
+
+
+@pytest.fixture(scope="module")
+def lifted():
+    # u_b far above the fed size's settling: every droplet leaving the layer is lifted with the share LIFT; a return
+    # flow ten times the other tests' (u_up 11.5 mm/s) brings the lifted droplets round in a minute, not ten
+    model = popbal.setup("demo", SINGLE_SIZE + LAYERS + [f"popbal.bottom_lift_share={LIFT}",
+                                                          "popbal.bottom_lift_velocity_ratio=1000",
+                                                          "popbal.return_flow_ratio=0.5",
+                                                          "popbal.end_time=400", "popbal.output_interval=20"])
+    return model, popbal.run(model, progress=False)
+
+
+def test_lifted_droplets_recirculate_through_the_return_flow_as_their_closed_forms_say(lifted):
+    """A share lambda of what leaves the bottom layer goes up the outer zone and comes back down the channel, so at
+    steady state the layer passes Q / (1 - lambda): phi U_h(phi) (1 - lambda) = Q / A_box; the outer zone carries
+    the lifted flux lambda Q / (1 - lambda) up at u_up - U_h(phi_o): phi_o (u_up - U_h(phi_o)) = lambda Q / ((1 -
+    lambda) A_outer); what settles is still the feed, and the mass is kept."""
+    model, result = lifted
+    case = model.case
+    q = case.feed.mass_rate / case.matte.density
+    own = settling_velocity(case, case.feed.mean_diameter)
+    n = model.parameters["hindered_exponent"]
+    u_up = model.return_velocity
+    assert u_up > own  # the lifted droplets rise: the closed form below assumes it
+    expected, unlifted = _bottom_closed_form(model, lifted=LIFT), _bottom_closed_form(model)
+    got = _volume_fraction(result, BOTTOM, 0)
+    outer_expected = brentq(lambda phi: phi * (u_up - own * richardson_zaki_factor(phi, n))
+                            - LIFT * q / ((1.0 - LIFT) * model.zone_area[OUTER]), 0.0, 0.5, xtol=1e-18)
+    outer = _volume_fraction(result, OUTER, model.cells // 2)
+    print(f"\nlifted bottom: phi {got:.6g} against {expected:.6g} (unlifted {unlifted:.6g}); outer zone mid-height "
+          f"{outer:.4g} against {outer_expected:.4g}")
+    assert got == pytest.approx(expected, rel=1e-4)
+    assert expected > 1.2 * unlifted  # the lift matters here
+    assert outer == pytest.approx(outer_expected, rel=1e-4)
+    series = result.timeseries
+    assert np.abs(series["mass_balance_error"]).max() < 1e-10
+    late = series[series["time"] >= 300.0]
+    assert np.polyfit(late["time"], late["mass_settled"], 1)[0] == \
+        pytest.approx(np.polyfit(late["time"], late["mass_fed"], 1)[0], rel=1e-3)
+
+
+def test_lift_share_falls_with_the_droplets_settling_velocity_over_the_upflow():
+    from popbal.closures import lift_share
+
+    u = np.array([0.0, 0.5e-3, 1.0e-3, 3.0e-3])
+    share = lift_share(u, 0.14, 1.0e-3)
+    assert share == pytest.approx(0.14 * np.exp(-np.array([0.0, 0.25, 1.0, 9.0])), rel=1e-12)
+    assert not lift_share(u, 0.0, 1.0e-3).any()
+
+
+@pytest.mark.parametrize("overrides, names", [
+    (["popbal.bottom_lift_share=0.1"], "bottom_lift_velocity_ratio"),
+    (["popbal.bottom_lift_velocity_ratio=0.2"], "bottom_lift_share"),
+    (["popbal.bottom_lift_share=0.1", "popbal.bottom_lift_velocity_ratio=0.2", "popbal.return_flow_ratio=0.05",
+      "popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6"], "bottom_layer_factor"),
+    (["popbal.bottom_lift_share=0.1", "popbal.bottom_lift_velocity_ratio=0.2", "popbal.bottom_layer_factor=1",
+      "popbal.return_flow_ratio=0", "popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6"],
+     "return_flow_ratio"),
+    (["popbal.bottom_lift_share=1.5"], "bottom_lift_share"),
+])
+def test_lift_keys_without_what_they_lift_from_or_into_are_refused(overrides, names):
+    with pytest.raises(CaseError, match=names):
+        popbal.setup("demo", overrides)
