@@ -306,8 +306,8 @@ def bottom_lift(case: Case, bottom_thickness: float, return_velocity: float) -> 
         raise CaseError(f"popbal.bottom_lift_share = {share!r}: needs popbal.bottom_lift_velocity_ratio (a number > 0:"
                         " the upflow at the bottom layer's top over the return flow's u_up)")
     if not bottom_thickness > 0.0:
-        raise CaseError(f"popbal.bottom_lift_share = {share!r}: lifts droplets out of a bottom layer this case does not "
-                        "have; allowed only with popbal.bottom_layer_factor (or leave it out)")
+        raise CaseError(f"popbal.bottom_lift_share = {share!r}: lifts droplets out of a bottom layer this case does "
+                        "not have; allowed only with popbal.bottom_layer_factor (or leave it out)")
     if not return_velocity > 0.0:
         raise CaseError(f"popbal.bottom_lift_share = {share!r}: lifts droplets into a return flow this case does not "
                         "have; allowed only with popbal.return_flow_ratio > 0 (or leave it out)")
