@@ -540,8 +540,10 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
     """Store every finished run of a run-set sweep of the full engine (``settler sweep --set SET_FILE --engine full
     --out SWEEP_OUT``; finished runs only, so this may run while the sweep goes on) as ``dest_root/<run name>/``,
     its command the one that regenerates it alone (``settler sweep --set SET_FILE --engine full --only NAME``),
-    with the kernel runs' exposure (:mod:`analysis.kernel_run`) and, for runs with coalescence and a merge table,
-    their collisions by height (:data:`analysis.band_efficiency.COLLISIONS_FILE`), measured on the run folder.
+    with the kernel runs' exposure (:mod:`analysis.kernel_run`), for runs with coalescence and a merge table their
+    collisions by height (:data:`analysis.band_efficiency.COLLISIONS_FILE`), and for runs whose snapshots follow
+    the droplets by ident what the return flow lifts off the floor (:data:`analysis.floor_lift.FLOOR_LIFT_FILE`),
+    both measured on the run folder.
     ``snapshots`` is the droplet snapshots each run keeps where its entry in the set has no ``snapshots`` key. Returns
     name -> the stored folder, or -> why it was not stored (not finished)."""
     from analysis.sweep.execution import DONE_FILE, POINTS, point_hash
@@ -574,6 +576,15 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
                 write_collisions(folder, results[run.name])
             except ValueError:
                 pass
+        # what the return flow lifts off the floor, by size, needs the run's every snapshot (analysis.floor_lift);
+        # a run whose snapshots carry no idents, or with fewer than two in its window, goes without
+        from analysis.files import NoData
+        from analysis.floor_lift import write_floor_lift
+
+        try:
+            write_floor_lift(folder, results[run.name])
+        except (ValueError, NoData):
+            pass
     return results
 
 
