@@ -209,7 +209,7 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
         work.shear[zone, 0] = p["shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \
             / model.bottom_thickness
         # the plume's discharge drives the layer's droplets into the floor (bottom_drain_coefficient; 0: none)
-        work.velocities[zone, 0] += p["bottom_drain"] * p["plume_velocity"] * p["transport_factor"]
+        work.velocities[zone, 0] += p["bottom_push"]
     elif zone != OUTER and model.channel_radius > 0.0:
         # G = shear_coefficient u / R with the cell's cloud scale (R_c in the plume, delta in the roof layer, which
         # has its own coefficient: roof_shear_coefficient, the channel's where absent)
@@ -427,7 +427,7 @@ def _bottom_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
     work.into_bottom[:] = 0.0
     p = model.parameters
     if p["bottom_lift"] > 0.0:  # the return flow carries a share of the slow droplets off the floor, by size
-        own = velocity - p["bottom_drain"] * p["plume_velocity"] * p["transport_factor"]
+        own = velocity - p["bottom_push"]  # their own hindered settling, without the plume's push
         lifted = out * lift_share(own, p["bottom_lift"], p["bottom_lift_velocity"])[None, :]
         content[OUTER, 0] += lifted * volume / (model.zone_area[OUTER] * model.cell_height)
         out = out - lifted

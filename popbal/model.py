@@ -244,7 +244,9 @@ def build(case: Case) -> Model:
         else p.roof_collision_efficiency,
         "roof_shear_coefficient": p.shear_coefficient if p.roof_shear_coefficient is None
         else p.roof_shear_coefficient,
-        "bottom_drain": p.bottom_drain_coefficient or 0.0,
+        # the plume's discharge pushes the bottom layer's droplets into the floor at bottom_drain_coefficient x the
+        # plume's droplet velocity [m/s]
+        "bottom_push": (p.bottom_drain_coefficient or 0.0) * plume_velocity * transport,
         # the slag on the axis runs at u_s, the droplets' cloud at transport x u_s
         "axis_velocity_ratio": (1.0 if p.axis_velocity_ratio is None else p.axis_velocity_ratio) / transport,
         "plume_velocity": plume_velocity,
