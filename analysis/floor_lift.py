@@ -10,12 +10,13 @@ lifted / (lifted + left), estimates the share of what leaves the floor that the 
 snapshots must be close enough for few droplets to go in and out of the band between them (the remade runs write
 one a second; a droplet settling at 1 mm/s crosses a 10 mm band in 10 s).
 
-:func:`fit_lift` fits popbal's form lambda exp(-(U / u_b)^2) to those counts by binomial maximum likelihood, U each
-bin's own terminal settling velocity at its droplets' mean diameter (:func:`settler.derived.settling_velocity`), and
-the run's slag gives u_up, the mean upflow over the part of the mid-height layer of cells where the slag rises
-(time mean over the window's slag snapshots; NaN where the snapshots keep no whole slag grid), so that beta =
-u_b / u_up. Measured on the demo at 2.5 mm cells continued to 60 s (35-60 s, 26 snapshots; exploratory, 2026-12-06):
-4.5 % of the floor's leavers lifted, 0.136 below 0.5 mm and none above 1 mm; u_up 3.75 mm/s.
+:func:`fit_lift` fits popbal's form lambda exp(-(U / u_b)^2) (:func:`popbal.closures.lift_share`, the one
+implementation) to those counts by binomial maximum likelihood, U each bin's own terminal settling velocity at its
+droplets' mean diameter (:func:`settler.derived.settling_velocity`), and the run's slag gives u_up, the mean upflow
+over the part of the mid-height layer of cells where the slag rises (time mean over the window's slag snapshots; NaN
+where the snapshots keep no whole slag grid), so that beta = u_b / u_up. Measured on the demo at 2.5 mm cells
+continued to 60 s (35-60 s, 26 snapshots; exploratory, 2026-12-06): 4.5 % of the floor's leavers lifted, 0.136 below
+0.5 mm and none above 1 mm; lambda 0.199 +- 0.008, u_b 0.754 +- 0.016 mm/s, u_up 3.78 mm/s, beta 0.199.
 
 ``python -m analysis.floor_lift RUN...`` prints the table and the fit; ``write_floor_lift`` stores it beside a
 reference run (:data:`FLOOR_LIFT_FILE`, written by ``python -m analysis.reference set``).
@@ -82,17 +83,14 @@ def lift_counts(snapshots, height: float, edges=EDGES) -> tuple[pd.DataFrame, fl
     return table, span
 
 
-def lift_share_model(velocity, share, lift_velocity):
-    """popbal's form lambda exp(-(U / u_b)^2) [-] (popbal.closures.lift_share) for U [m/s]."""
-    return share * np.exp(-(np.asarray(velocity, dtype=float) / lift_velocity) ** 2)
-
-
 def fit_lift(velocity, lifted, left) -> dict:
     """Binomial maximum-likelihood fit of lambda exp(-(U / u_b)^2) to ``lifted`` of ``lifted + left`` droplets per
     bin of settling velocity U [m/s] (counts, or rates over one span): {"share" lambda [-], "lift_velocity" u_b
     [m/s], "standard_errors" (of both, from the observed information; counts must then be counts), "converged"}.
     NaN where nothing was lifted."""
     from scipy.optimize import minimize
+
+    from popbal.closures import lift_share
 
     u = np.asarray(velocity, dtype=float)
     k, m = np.asarray(lifted, dtype=float), np.asarray(left, dtype=float)
@@ -103,25 +101,19 @@ def fit_lift(velocity, lifted, left) -> dict:
         return nan
     scale = float(np.median(u[k > 0])) or 1e-3
 
+    def nll(x):  # the binomial negative log-likelihood of (lambda, u_b)
+        p = np.clip(lift_share(u, x[0], x[1]), 1e-300, 1.0 - 1e-15)
+        return -float(np.sum(k * np.log(p) + m * np.log1p(-p)))
+
     def unpack(theta):  # lambda in (0, 1) by a logistic, u_b > 0 by a logarithm
         return 1.0 / (1.0 + math.exp(-theta[0])), scale * math.exp(theta[1])
 
-    def negative_log_likelihood(theta):
-        lam, ub = unpack(theta)
-        p = np.clip(lift_share_model(u, lam, ub), 1e-300, 1.0 - 1e-15)
-        return -float(np.sum(k * np.log(p) + m * np.log1p(-p)))
-
     first = k.sum() / (k.sum() + m.sum())
-    best = minimize(negative_log_likelihood, [math.log(first / (1.0 - first)), 0.0], method="Nelder-Mead",
+    best = minimize(lambda theta: nll(unpack(theta)), [math.log(first / (1.0 - first)), 0.0], method="Nelder-Mead",
                     options={"xatol": 1e-10, "fatol": 1e-12, "maxiter": 4000})
     lam, ub = unpack(best.x)
     # observed information in (lambda, u_b) by central differences of the log-likelihood
     step = np.array([1e-4 * lam, 1e-4 * ub])
-
-    def nll(x):
-        p = np.clip(lift_share_model(u, x[0], x[1]), 1e-300, 1.0 - 1e-15)
-        return -float(np.sum(k * np.log(p) + m * np.log1p(-p)))
-
     x0 = np.array([lam, ub])
     info = np.zeros((2, 2))
     for i in range(2):
@@ -153,10 +145,8 @@ def mid_height_upflow(run, times) -> float:
         if layer.sum() < 4:  # one plane of the slag, not a layer of cells
             return math.nan
         w = velocity[layer, 2]
-        values.append((w.mean(), w[w > 0.0].mean() if (w > 0.0).any() else 0.0))
-    if not values:
-        return math.nan
-    return float(np.mean([v[1] for v in values]))
+        values.append(w[w > 0.0].mean() if (w > 0.0).any() else 0.0)
+    return float(np.mean(values)) if values else math.nan
 
 
 def measure_floor_lift(run, window: tuple[float, float] | None = None) -> tuple[pd.DataFrame, dict]:
@@ -243,8 +233,9 @@ def main(argv=None) -> int:
     if args.window:
         try:
             window = tuple(float(x) for x in args.window.split(":"))
-            assert len(window) == 2 and window[0] < window[1]
-        except (ValueError, AssertionError):
+        except ValueError:
+            window = ()
+        if len(window) != 2 or not window[0] < window[1]:
             print(f"{parser.prog}: --window {args.window!r}: allowed START:END in seconds, START < END",
                   file=sys.stderr)
             return 2

@@ -10,8 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.floor_lift import (EDGES, FLOOR_BAND, fit_lift, lift_counts, lift_share_model, measure_floor_lift,
-                                 read_floor_lift, write_floor_lift)
+from analysis.floor_lift import (EDGES, FLOOR_BAND, fit_lift, lift_counts, measure_floor_lift, read_floor_lift,
+                                 write_floor_lift)
+from popbal.closures import lift_share
 from settler.cases import load_case
 from settler.derived import settling_velocity
 from settler.output import time_series_frame, write_time_series
@@ -52,7 +53,7 @@ def test_the_fit_recovers_the_share_and_velocity_that_made_the_counts():
     within a few standard errors, and the standard errors shrink as one over the square root of the counts."""
     rng = np.random.default_rng(7)
     u = np.array([0.2, 0.4, 0.6, 0.8, 1.0, 1.3, 1.8, 2.5]) * 1e-3
-    p = lift_share_model(u, 0.15, 0.8e-3)
+    p = lift_share(u, 0.15, 0.8e-3)
     for n, tolerance in ((20_000, 4.0), (200_000, 4.0)):
         lifted = rng.binomial(n, p)
         fit = fit_lift(u, lifted, n - lifted)
