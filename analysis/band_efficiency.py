@@ -38,7 +38,7 @@ collision rate, taken as the mean over the snapshots in the window times its len
 count of the merges and the standard error of the mean rate over the snapshots, in quadrature (one snapshot: the
 rate's scatter is unknown and only the count's part is given).
 
-A stored reference keeps few snapshots and one plane of the slag, so ``python -m analysis.reference set`` measures
+A stored reference keeps few snapshots and one plane of the slag, so ``python -m analysis.reference_set`` measures
 each run folder when it stores it and keeps the table as :data:`COLLISIONS_FILE` (:func:`write_collisions`), which
 :func:`band_efficiency` reads back. The table also keeps, per band under the inlet and elsewhere, the matte volume
 held and the slag's shear rate at the droplets: the zone quantities (roof inventory, roof and channel shear) that the

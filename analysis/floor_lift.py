@@ -19,7 +19,7 @@ continued to 60 s (35-60 s, 26 snapshots; exploratory, 2026-12-06): 4.5 % of the
 0.5 mm and none above 1 mm; lambda 0.199 +- 0.008, u_b 0.754 +- 0.016 mm/s, u_up 3.78 mm/s, beta 0.199.
 
 ``python -m analysis.floor_lift RUN...`` prints the table and the fit; ``write_floor_lift`` stores it beside a
-reference run (:data:`FLOOR_LIFT_FILE`, written by ``python -m analysis.reference set``).
+reference run (:data:`FLOOR_LIFT_FILE`, written by ``python -m analysis.reference_set``).
 """
 
 from __future__ import annotations

@@ -75,7 +75,7 @@ def test_a_run_set_of_full_runs_records_each_runs_own_metrics(tmp_path):
     assert info["engine"] == "full" and set(info["runs"]) == {"base", "double"}
     # stored as references under their names, each with the command that regenerates it alone
     from analysis import load_run
-    from analysis.reference import store_set
+    from analysis.reference_set import store_set
 
     stored = store_set(tmp_path / "out", path, tmp_path / "reference")
     assert set(stored) == {"base", "double"}

@@ -259,7 +259,7 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
         table, meta = read_collisions(path)
         if "mixed_shear_under_inlet" not in table:
             raise FileNotFoundError(f"{path}: no well-mixed shear collisions (stored before 2026-12-05); store the "
-                                    "run again from its run folder (python -m analysis.reference set)")
+                                    "run again from its run folder (python -m analysis.reference_set)")
         top = table.iloc[int(np.argmax(table["z"].to_numpy()))]
         if not math.isfinite(top["mixed_shear_under_inlet"]) or not math.isfinite(top["shear_rate_under_inlet"]):
             raise ValueError(f"{path}: no slag shear rate in the top band under the inlet (measured without the whole "

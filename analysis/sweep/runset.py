@@ -15,7 +15,7 @@ design.toml``). The file is TOML::
     droplets = "kernel_droplets.csv"              # optional (full engine): an initial droplet list, relative to
                                                   # this file (fulldem.io.droplet_list)
     snapshots = 1                                 # optional: droplet snapshots its stored reference keeps (0 =
-                                                  # none; python -m analysis.reference set); not part of the run
+                                                  # none; python -m analysis.reference_set); not part of the run
 
 Each run is a point of the sweep machinery (:mod:`analysis.sweep.execution`): a folder ``OUT/points/<hash>/`` keyed
 by its resolved case, its engine and its droplet list, ``done.json`` written last; with ``--engine full`` a point is
