@@ -195,9 +195,11 @@ Both layers integrate dc/dt = inflow - (v / h) c exactly over a step (popbal.dri
 whatever the step; tests/test_popbal_layers.py checks both against their closed forms (the bottom layer's with and
 without its drainage) and that the roof's own kernel keys scale its merges alone.
 
-Not modelled (calibration will tell whether they matter): the exchange of droplets between the zones (the paper's ring flow, which pulls droplets into the channel, and, in the
-simple case's lower half, carries them out of the slag jet), the cloud's break-up, and inertia of the plume
-(Re > 1).
+Not modelled (calibration will tell whether they matter): the exchange of droplets between the zones along the
+height (the full runs' plume entrains the return flow's slag and its droplets over its upper part and gives slag
+back, with a share of its droplets, below: analysis.circulation and docs/guide/reduced-model.md; the paper's ring
+flow, which pulls droplets into the channel, and, in the simple case's lower half, carries them out of the slag
+jet), the cloud's break-up, and inertia of the plume (Re > 1).
 """
 
 from __future__ import annotations
