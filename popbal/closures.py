@@ -191,6 +191,19 @@ are to be measured on the resolved runs (about 0.14 and 0.2 on the one above), n
 the volume rate Q with coalescence off then holds phi U_h(phi) (1 - lambda') = Q / A_box, lambda' the fed size's
 share: each droplet passes lambda' / (1 - lambda') times more (tests/test_popbal_layers.py).
 
+The plume's turn into the return flow above the bottom layer (``bottom_turning_share`` T). The bottom layer
+was built on the 5 mm runs, whose plume gives almost none of its droplets to the return flow; resolved, it does. In
+the continued demo_cell_25 (35-60 s, droplets followed by ident over 5 s; analysis.circulation) the droplets in
+sinking slag between the bottom and the top tenth of the height that leave it downward or outward go into rising
+slag (67 per s, at 10-50 mm, where the plume gives its slag back) about as often as onto the floor (77 per s), with
+the same mean diameter (0.61 and 0.58 mm); in the 5 mm demo runs and in deep none do. The closure: with a bottom
+layer, of what leaves the channel's bottom a share T (1 - min(1, U_h / u_up)) turns into the outer zone's bottom
+cell, as the whole 1 - min(1, U_h / u_up) does without a bottom layer, and the rest enters the bottom layer. At
+steady state without coalescence the bottom layer then passes the feed alone and the outer zone carries
+t Q / (1 - t) up, t the fed size's turning share (tests/test_popbal_layers.py). About 0.6 on the run above
+(0.47 = T (1 - 1.0 / 3.8)); a constant to be measured on the resolved runs, with deep's 0 asking for a law in the
+plume's Reynolds number (7 against 0.3), as the transport closure's dispersion has.
+
 Both layers integrate dc/dt = inflow - (v / h) c exactly over a step (popbal.driver), so their steady states hold
 whatever the step; tests/test_popbal_layers.py checks both against their closed forms (the bottom layer's with and
 without its drainage) and that the roof's own kernel keys scale its merges alone.

@@ -358,6 +358,11 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
                 share = settling_share(work.velocities[OUTER, 0] + model.return_velocity, model.return_velocity)
                 work.turned[:] = work.bottom_out * (1.0 - share)[None, :] * area
                 work.bottom_out *= share[None, :]
+            elif p["bottom_turning"] > 0.0 and zone == CHANNEL:  # a share of the slow ones turns, the rest goes down
+                turning = p["bottom_turning"] * (1.0 - settling_share(work.velocities[OUTER, 0] + model.return_velocity,
+                                                                      model.return_velocity))
+                work.turned[:] = work.bottom_out * turning[None, :] * area
+                work.bottom_out *= (1.0 - turning)[None, :]
             _reach_floor(model, work, books, area)
         books.lost += work.sink_out * area
         if p["coalescence"]:

@@ -279,6 +279,7 @@ def build(case: Case) -> Model:
     return_velocity = closures.return_velocity(ratio, plume_velocity)
     parameters["bottom_lift"], parameters["bottom_lift_velocity"] = bottom_lift(case, bottom_thickness,
                                                                                 return_velocity)
+    parameters["bottom_turning"] = bottom_turning(case, bottom_thickness, return_velocity)
     return Model(case=case, grid=grid, cells=cells, cell_height=dz, z=z, zone_area=zone_area,
                  channel_radius=channel_radius, inlet_radius=inlet_radius, feed_density=case.matte.density,
                  feed_number_rate=feed_number_rate,
@@ -314,6 +315,23 @@ def bottom_lift(case: Case, bottom_thickness: float, return_velocity: float) -> 
         raise CaseError(f"popbal.bottom_lift_share = {share!r}: lifts droplets into a return flow this case does not "
                         "have; allowed only with popbal.return_flow_ratio > 0 (or leave it out)")
     return float(share), ratio * return_velocity
+
+
+def bottom_turning(case: Case, bottom_thickness: float, return_velocity: float) -> float:
+    """``bottom_turning_share`` [-] (0 without it): the share of the channel's droplets slower than the return flow
+    that turn into it at the channel's bottom instead of entering the bottom layer (popbal.closures). Refuses
+    (CaseError) the key where the case has no bottom layer or no return flow."""
+    share = case.popbal.bottom_turning_share
+    if not share:
+        return 0.0
+    if not bottom_thickness > 0.0:
+        raise CaseError(f"popbal.bottom_turning_share = {share!r}: turns droplets away from a bottom layer this case "
+                        "does not have (without one the channel's slow droplets all turn); allowed only with "
+                        "popbal.bottom_layer_factor (or leave it out)")
+    if not return_velocity > 0.0:
+        raise CaseError(f"popbal.bottom_turning_share = {share!r}: turns droplets into a return flow this case does "
+                        "not have; allowed only with popbal.return_flow_ratio > 0 (or leave it out)")
+    return float(share)
 
 
 def roof_slag_velocity(case: Case, roof: bool, horizontal: bool) -> float:

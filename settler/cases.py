@@ -292,6 +292,14 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                                     "which droplets bottom_lift_share lifts, over the outer zone's "
                                                     "upflow u_up (popbal.closures); needed with bottom_lift_share.",
                                             0.0, exclusive_minimum=True, optional=True),
+        "bottom_turning_share": Field(F, "-", "With a bottom layer and a return flow: of what leaves the channel's "
+                                              "bottom, the share bottom_turning_share x (1 - min(1, U_h / u_up)) of "
+                                              "droplets of hindered settling velocity U_h turns up into the outer "
+                                              "zone with the slag instead of entering the bottom layer (the resolved "
+                                              "runs' plume gives part of its droplets to the return flow as it "
+                                              "turns; popbal.closures); absent or 0: none turns (without a bottom "
+                                              "layer the whole 1 - min(1, U_h / u_up) turns).", 0.0, 1.0,
+                                      optional=True),
         "axis_velocity_ratio": Field(F, "-", "Slag velocity on the channel axis (the channel_velocity output) / the "
                                              "plume velocity u_c that carries the droplets; absent: 1.", 0.0,
                                      exclusive_minimum=True, optional=True),

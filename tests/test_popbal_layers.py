@@ -294,6 +294,63 @@ def test_lift_share_falls_with_the_droplets_settling_velocity_over_the_upflow():
     assert not lift_share(u, 0.0, 1.0e-3).any()
 
 
+# --- the plume's turn into the return flow above the bottom layer (popbal.bottom_turning_share): resolved, the plume
+# gives part of its droplets to the return flow as it turns (popbal.closures)
+
+TURNING = 0.6  # bottom_turning_share [-] (chosen for the test)
+
+
+@pytest.fixture(scope="module")
+def turned():
+    # a return flow ten times the other tests' (u_up 11.5 mm/s) brings the turned droplets round in a minute
+    model = popbal.setup("demo", SINGLE_SIZE + LAYERS + [f"popbal.bottom_turning_share={TURNING}",
+                                                          "popbal.return_flow_ratio=0.5",
+                                                          "popbal.end_time=400", "popbal.output_interval=20"])
+    return model, popbal.run(model, progress=False)
+
+
+def test_turned_droplets_recirculate_and_the_bottom_layer_passes_the_feed_alone(turned):
+    """A share t = T (1 - U_h / u_up) of what leaves the channel's bottom goes up the outer zone (U_h the outer zone's
+    bottom cell's hindered settling, which the step uses) and comes back down the channel, so at steady state the
+    bottom layer passes the feed alone, phi U_h(phi) = Q / A_box as without turning, and the outer zone carries the
+    turned flux t Q / (1 - t) up at u_up - U_h(phi_o): phi_o (u_up - U_h(phi_o)) = t Q / ((1 - t) A_outer); what
+    settles is the feed, and the mass is kept."""
+    model, result = turned
+    case = model.case
+    q = case.feed.mass_rate / case.matte.density
+    own = settling_velocity(case, case.feed.mean_diameter)
+    n = model.parameters["hindered_exponent"]
+    u_up = model.return_velocity
+    assert u_up > own  # the turned droplets rise: the closed form below assumes it
+    bottom_cell = _volume_fraction(result, OUTER, 0)
+    t = TURNING * (1.0 - own * richardson_zaki_factor(bottom_cell, n) / u_up)
+    outer_expected = brentq(lambda phi: phi * (u_up - own * richardson_zaki_factor(phi, n))
+                            - t * q / ((1.0 - t) * model.zone_area[OUTER]), 0.0, 0.5, xtol=1e-18)
+    outer = _volume_fraction(result, OUTER, model.cells // 2)
+    got, expected = _volume_fraction(result, BOTTOM, 0), _bottom_closed_form(model)
+    print(f"\nturned: bottom phi {got:.6g} against {expected:.6g}; outer zone mid-height {outer:.4g} against "
+          f"{outer_expected:.4g} (t = {t:.4f})")
+    assert got == pytest.approx(expected, rel=1e-4)
+    assert outer == pytest.approx(outer_expected, rel=1e-4)
+    assert outer > 0.5 * t / (1.0 - t) * q / (model.zone_area[OUTER] * u_up)  # the turn matters here
+    series = result.timeseries
+    assert np.abs(series["mass_balance_error"]).max() < 1e-10
+    late = series[series["time"] >= 300.0]
+    assert np.polyfit(late["time"], late["mass_settled"], 1)[0] == \
+        pytest.approx(np.polyfit(late["time"], late["mass_fed"], 1)[0], rel=1e-3)
+
+
+@pytest.mark.parametrize("overrides, names", [
+    (["popbal.bottom_turning_share=0.5"], "bottom_layer_factor"),
+    (["popbal.bottom_turning_share=0.5", "popbal.bottom_layer_factor=1", "popbal.return_flow_ratio=0",
+      "popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6"], "return_flow_ratio"),
+    (["popbal.bottom_turning_share=1.5"], "bottom_turning_share"),
+])
+def test_turning_without_a_bottom_layer_or_a_return_flow_is_refused(overrides, names):
+    with pytest.raises(CaseError, match=names):
+        popbal.setup("demo", overrides)
+
+
 @pytest.mark.parametrize("overrides, names", [
     (["popbal.bottom_lift_share=0.1"], "bottom_lift_velocity_ratio"),
     (["popbal.bottom_lift_velocity_ratio=0.2"], "bottom_lift_share"),
