@@ -204,6 +204,20 @@ t Q / (1 - t) up, t the fed size's turning share (tests/test_popbal_layers.py). 
 (0.47 = T (1 - 1.0 / 3.8)); a constant to be measured on the resolved runs, with deep's 0 asking for a law in the
 plume's Reynolds number (7 against 0.3), as the transport closure's dispersion has.
 
+The return flow's circulation (``entrainment_length`` a, ``turning_length`` b). The full runs' plume takes the
+return flow's slag in under the lid and gives it back above the floor, and the return flow's droplets go with the
+slag it takes in (analysis.circulation; docs/guide/reduced-model.md): in the continued demo_cell_25, 80 per second
+pass from rising into sinking slag at 40-90 mm, where Q_down grows downward, against 13 reaching the roof, and the
+growth of Q_down times the return flow's number density predicts 67 of the 77 per second that pass at 40-90 mm. With
+both keys the outer zone's upflow is u_up s(z) (:func:`circulation_profile`, u_up its peak) instead of u_up at every
+height, and each cell passes e_j c_j per second into the channel's cell at its height where e_j > 0
+(:func:`exchange_rates`), inside the implicit transport (popbal.kernels.transport_two_way), so the exchange keeps
+the slag's continuity exactly; where e_j < 0 the slag the plume gives back enters, carrying the droplets that
+``bottom_turning_share`` turns out of the channel's bottom outflow, shared over those cells in proportion to the
+slag each takes (in the full run they pass into rising slag at 10-50 mm, not at the floor). a and b are measured on the slag alone (Q_down's shape):
+1.12 and 0.54 on the continued demo_cell_25, 0.64 and 0.34 in cubic, 0.72 and 0.38 in the 5 mm demo; the tall
+columns give slag back all along the height, which the form does not hold.
+
 Both layers integrate dc/dt = inflow - (v / h) c exactly over a step (popbal.driver), so their steady states hold
 whatever the step; tests/test_popbal_layers.py checks both against their closed forms (the bottom layer's with and
 without its drainage) and that the roof's own kernel keys scale its merges alone.
@@ -331,6 +345,30 @@ def lift_share(settling_velocity, share, lift_velocity):
 def return_velocity(ratio, plume_velocity):
     """The outer zone's slag upflow u_up = r u_s [m/s] (r [-], u_s the steady plume velocity [m/s]); 0 when r is 0."""
     return ratio * plume_velocity if ratio > 0.0 else 0.0
+
+
+def circulation_profile(z, height, column_radius, entrainment_length, turning_length, samples=2001):
+    """s(z) [-] at heights ``z`` [m]: the return flow's upflow over its peak in a closed column of ``height`` [m],
+    (1 - exp(-(H - z) / (a R))) (1 - exp(-z / (b R))) normalised to its largest value over [0, H], R the
+    ``column_radius`` [m], a the ``entrainment_length`` and b the ``turning_length`` [column radii]: the plume
+    entrains the return flow's slag over about a R under the lid and gives it back over about b R above the floor
+    (the circulation paragraph of the module docstring)."""
+    def shape(x):
+        x = np.asarray(x, dtype=float)
+        return -np.expm1(-(height - x) / (entrainment_length * column_radius)) \
+            * -np.expm1(-x / (turning_length * column_radius))
+    return shape(z) / shape(np.linspace(0.0, height, samples)).max()
+
+
+def exchange_rates(upflow, cell_height):
+    """The outer zone's lateral exchange with the channel [1/s] per cell from its upflow u_j [m/s] at the cell
+    centres (cell 0 at the floor, u = 0 below it): e_j = (u_{j-1} - u_j) / dz, positive where the upflow falls with
+    height (the plume entrains the slag and the droplets in it at that rate), negative where it grows (the plume
+    gives slag back). Continuity of the slag in the donor-cell transport: a cell of uniform content stays uniform
+    when it loses e_j of it per second and gains -e_j of slag as full."""
+    upflow = np.asarray(upflow, dtype=float)
+    below = np.concatenate([[0.0], upflow[:-1]])
+    return (below - upflow) / cell_height
 
 
 def settling_share(settling_velocity, upflow):

@@ -186,6 +186,9 @@ class _Work:
         self.turned = np.zeros((QUANTITIES, sections))
         self.top_out = np.zeros((QUANTITIES, sections))
         self.rows = np.zeros((3, cells))
+        self.lateral_out = np.zeros((cells, QUANTITIES, sections))  # entrained out of the outer zone [per m^3]
+        self.no_loss = np.zeros(cells)
+        self.no_source = np.zeros((QUANTITIES, sections))
         self.into_bottom = np.zeros((QUANTITIES, sections))  # what reached the bottom layer in the step [absolute]
         self.roof_out = np.zeros((QUANTITIES, sections))  # what drained from the roof layer during the step [absolute]
         self.roof_in = np.zeros((QUANTITIES, sections))  # the roof layer's inflow during the step [per m^3 per s]
@@ -200,7 +203,9 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
                     p["hindered_exponent"], model.feed_density, p["density_slag"], model.viscosity, model.gravity,
                     coefficient, radius, model.downflow, work.diameters[zone], work.densities[zone],
                     work.velocities[zone], work.volume_fraction[zone], work.collective[zone])
-    if zone == OUTER and model.return_velocity > 0.0:
+    if zone == OUTER and model.return_upflow.size:  # the slag rises at u_up s(z) outside the plume
+        work.velocities[zone] -= model.return_upflow[:, None]
+    elif zone == OUTER and model.return_velocity > 0.0:
         work.velocities[zone] -= model.return_velocity  # the slag rises at u_up outside the plume
     if zone == ROOF:  # the slag feed flows through the roof at its inlet velocity, not spread over the box
         work.velocities[zone, -1] += model.roof_slag_velocity - model.downflow[-1]
@@ -359,7 +364,8 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
                 work.turned[:] = work.bottom_out * (1.0 - share)[None, :] * area
                 work.bottom_out *= share[None, :]
             elif p["bottom_turning"] > 0.0 and zone == CHANNEL:  # a share of the slow ones turns, the rest goes down
-                turning = p["bottom_turning"] * (1.0 - settling_share(work.velocities[OUTER, 0] + model.return_velocity,
+                upflow = model.return_upflow[0] if model.return_upflow.size else model.return_velocity
+                turning = p["bottom_turning"] * (1.0 - settling_share(work.velocities[OUTER, 0] + upflow,
                                                                       model.return_velocity))
                 work.turned[:] = work.bottom_out * turning[None, :] * area
                 work.bottom_out *= (1.0 - turning)[None, :]
@@ -384,12 +390,23 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
 
 def _return_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, dt: float) -> None:
     """Transport in the outer zone with the return flow: velocities of either sign, the channel's turned outflow
-    entering its bottom cell, and what rises out of its top put into the channel's top cell (popbal.closures)."""
+    entering its bottom cell, what rises out of its top put into the channel's top cell; with the circulation's
+    profile the turned outflow enters where the plume gives its slag back and what the plume entrains goes into the
+    channel's cell at its height (popbal.closures)."""
     area, dz = model.zone_area[OUTER], model.cell_height
     work.top_out[:] = 0.0
-    bottom_source = work.turned / (area * dz * dt)  # the channel's turned outflow (its step ran first) [1/m^3/s]
+    entraining = model.exchange_rate.size > 0
+    if entraining:  # the channel's turned outflow comes with the slag the plume gives back, where it gives it
+        content[OUTER] += work.turned[None] * (model.turning_weight[:, None, None] / (area * dz))
+        bottom_source = work.no_source
+    else:  # into the bottom cell (the channel's step ran first) [1/m^3/s]
+        bottom_source = work.turned / (area * dz * dt)
+    work.lateral_out[:] = 0.0
     transport_two_way(content[OUTER], work.velocities[OUTER], model.sink_rate, work.top_source, bottom_source, dz, dt,
-                      work.bottom_out, work.top_out, work.sink_out, work.rows[0], work.rows[1], work.rows[2])
+                      work.bottom_out, work.top_out, work.sink_out, work.rows[0], work.rows[1], work.rows[2],
+                      model.exchange_rate if entraining else work.no_loss, work.lateral_out)
+    if entraining:  # the plume takes the entrained droplets into the channel's cell at their height
+        content[CHANNEL] += work.lateral_out * (area / model.zone_area[CHANNEL])
     _reach_floor(model, work, books, area)
     rise_into = ROOF if model.roof else CHANNEL  # the risers rejoin the roof layer where there is one
     content[rise_into, -1] += work.top_out * area / (model.zone_area[rise_into] * dz)

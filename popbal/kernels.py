@@ -610,7 +610,7 @@ def transport_zone(content, face_velocity, sink_rate, top_source, dz, dt, bottom
 
 @njit(cache=True)
 def transport_two_way(content, velocity, sink_rate, top_source, bottom_source, dz, dt, bottom_out, top_out,
-                      sink_out, diagonal, upper, rhs):
+                      sink_out, diagonal, upper, rhs, loss_rate, lateral_out):
     """Implicit (backward-Euler) first-order donor-cell transport in z of one zone over dt [s], for velocities of
     either sign: the return-flow zone, where droplets slower than the slag's upflow rise.
 
@@ -621,7 +621,9 @@ def transport_two_way(content, velocity, sink_rate, top_source, bottom_source, d
     algorithm (stable, positive, conservative). top_source, bottom_source (Q, K): sources into the top and bottom
     cells [per m^3 per s]. bottom_out, top_out, sink_out (Q, K) accumulate what left through the bottom (downward
     droplets of cell 0), the top (rising droplets of the top cell) and the sink during dt, per m^2 of the zone.
-    diagonal, upper, rhs (J,): work space. With every velocity >= 0 and no bottom source it gives
+    loss_rate (J,) [1/s, >= 0]: a sideways loss like the sink's (the plume's entrainment of the return flow,
+    popbal.closures.exchange_rates; zeros: none), accumulated per cell into lateral_out (J, Q, K) [per m^3 of the
+    zone]. diagonal, upper, rhs (J,): work space. With every velocity >= 0 and no bottom source it gives
     :func:`transport_zone`'s result (the same lower-triangular system).
     """
     n_j, n_q, n_k = content.shape
@@ -631,7 +633,7 @@ def transport_two_way(content, velocity, sink_rate, top_source, bottom_source, d
             # build: lower_j = -c v-_{j-1}, diagonal_j, upper_j = -c v+_{j+1}; forward elimination
             for j in range(n_j):
                 v = velocity[j, k]
-                diagonal[j] = 1.0 + c * abs(v) + dt * sink_rate[j]
+                diagonal[j] = 1.0 + c * abs(v) + dt * sink_rate[j] + dt * loss_rate[j]
                 upper[j] = -c * max(velocity[j + 1, k], 0.0) if j + 1 < n_j else 0.0
                 rhs[j] = content[j, q, k]
             rhs[n_j - 1] += dt * top_source[q, k]
@@ -649,6 +651,7 @@ def transport_two_way(content, velocity, sink_rate, top_source, bottom_source, d
                 content[j, q, k] = new
             for j in range(n_j):
                 sink_out[q, k] += dt * sink_rate[j] * content[j, q, k] * dz
+                lateral_out[j, q, k] += dt * loss_rate[j] * content[j, q, k]
             bottom_out[q, k] += dt * max(velocity[0, k], 0.0) * content[0, q, k]
             top_out[q, k] += dt * max(-velocity[n_j - 1, k], 0.0) * content[n_j - 1, q, k]
 

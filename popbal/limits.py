@@ -58,6 +58,10 @@ SPEED_TABLE_PAIR_BYTES = 8 + 32
 #: Bytes per output beyond its arrays: the time-series row (a dict of floats) and the snapshot's dict and array
 #: headers, and the DataFrame row they become.
 OUTPUT_OVERHEAD_BYTES = 4096
+#: Bytes of a run beyond its arrays and outputs: its model, books and work objects and the time-series frame, about
+#: 2 kB over the parts counted here on the simple preset at 40 cells (tracemalloc, 2026-12-06,
+#: tests/test_popbal_refusals.py), rounded up [chosen].
+RUN_OVERHEAD_BYTES = 65536
 #: Bytes per channel-profile row (settler.output.CHANNEL_PROFILE; PROFILE_BANDS rows per output): a dict of five
 #: floats, measured 2026-12-02 with tracemalloc at 312 bytes, and its DataFrame row (40 bytes), rounded up.
 PROFILE_ROW_BYTES = 400
@@ -129,12 +133,15 @@ def output_count(stop: float, interval: float) -> float:
 
 
 def estimate(cells, sections: float, outputs: float, ages: int, speed_table: bool) -> dict[str, float]:
-    """Bytes of the run's arrays by part: 'state', 'pairs', 'table', 'snapshots' and 'total'."""
+    """Bytes of the run's arrays by part: 'state', 'pairs', 'table', 'snapshots' and 'total' (theirs and
+    :data:`RUN_OVERHEAD_BYTES`)."""
     j, k, t = real(cells), real(sections), real(outputs)
     field = ZONE_COUNT * j * k * 8.0  # one (Z, J, K) float array
     parts = {
-        # content (Q arrays) + diameters, densities, velocities + per-step temporaries (masks, products)
-        "state": field * (QUANTITY_COUNT + 3 + 2) + 8.0 * ZONE_COUNT * j * 4,
+        # content (Q arrays) + diameters, densities, velocities + per-step temporaries (masks, products), the outer
+        # zone's entrained amounts per cell (J, Q, K) and its zero loss and source (J,), (Q, K)
+        "state": field * (QUANTITY_COUNT + 3 + 2) + 8.0 * ZONE_COUNT * j * 4 + (j + 1.0) * QUANTITY_COUNT * k * 8.0
+        + j * 8.0,
         "pairs": k * k * (PAIR_BYTES + (SPEED_TABLE_PAIR_BYTES if speed_table else 0)),
         "table": k * ages * 8.0,
         # three (Z, J, K) and six (K,) arrays per output, twice (the list and the stacked arrays), the rows, and
@@ -142,7 +149,7 @@ def estimate(cells, sections: float, outputs: float, ages: int, speed_table: boo
         "snapshots": t * (2.0 * (3.0 * field + 6.0 * 8.0 * k) + OUTPUT_OVERHEAD_BYTES
                           + PROFILE_BANDS * PROFILE_ROW_BYTES),
     }
-    parts["total"] = sum(parts.values())
+    parts["total"] = sum(parts.values()) + RUN_OVERHEAD_BYTES
     return parts
 
 

@@ -56,6 +56,11 @@ class Model:
     withdrawal per unit volume. velocity_table (K, M) [m/s] single-droplet settling velocity over age, age_step [s].
     residence_time [s]: slag mass / slag feed rate (inf without slag feed). stop_time [s]: when the run ends.
     return_velocity [m/s]: the outer zone's slag upflow u_up (0: no return flow; popbal.closures.return_velocity).
+    return_upflow (J,) [m/s] and exchange_rate (J,) [1/s]: with the circulation's profile (popbal.entrainment_length)
+    the outer zone's upflow per cell, u_up s(z), and the rate at which each cell's droplets pass into the channel
+    (popbal.closures.circulation_profile, exchange_rates; positive part), and turning_weight (J,) [-] the share of
+    the channel's turned droplets each cell takes (the slag the plume gives back there over all it gives back);
+    empty without it (u_up everywhere, the turned droplets into the bottom cell).
     cloud_coefficient [-] and cloud_radius [m] (J,): the channel zone's cloud law per cell, the plume's below the
     feed layer and the layer's in it (popbal.closures.cloud_profile).
     """
@@ -95,6 +100,9 @@ class Model:
     roof_radius: np.ndarray = field(default_factory=lambda: np.zeros(0))
     bottom_thickness: float = 0.0
     roof_slag_velocity: float = 0.0
+    return_upflow: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    exchange_rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    turning_weight: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def roof(self) -> bool:
@@ -280,6 +288,7 @@ def build(case: Case) -> Model:
     parameters["bottom_lift"], parameters["bottom_lift_velocity"] = bottom_lift(case, bottom_thickness,
                                                                                 return_velocity)
     parameters["bottom_turning"] = bottom_turning(case, bottom_thickness, return_velocity)
+    return_upflow, exchange_rate, turning_weight = circulation(case, z, dz, return_velocity)
     return Model(case=case, grid=grid, cells=cells, cell_height=dz, z=z, zone_area=zone_area,
                  channel_radius=channel_radius, inlet_radius=inlet_radius, feed_density=case.matte.density,
                  feed_number_rate=feed_number_rate,
@@ -290,7 +299,8 @@ def build(case: Case) -> Model:
                  viscosity=case.slag_viscosity, cloud_coefficient=cloud_coefficient, cloud_radius=cloud_radius,
                  parameters=parameters, return_velocity=return_velocity, roof_thickness=p.roof_thickness or 0.0,
                  roof_coefficient=roof_coefficient, roof_radius=roof_radius, bottom_thickness=bottom_thickness,
-                 roof_slag_velocity=roof_slag_velocity(case, roof_volume > 0.0, horizontal))
+                 roof_slag_velocity=roof_slag_velocity(case, roof_volume > 0.0, horizontal),
+                 return_upflow=return_upflow, exchange_rate=exchange_rate, turning_weight=turning_weight)
 
 
 def bottom_lift(case: Case, bottom_thickness: float, return_velocity: float) -> tuple[float, float]:
@@ -315,6 +325,31 @@ def bottom_lift(case: Case, bottom_thickness: float, return_velocity: float) -> 
         raise CaseError(f"popbal.bottom_lift_share = {share!r}: lifts droplets into a return flow this case does not "
                         "have; allowed only with popbal.return_flow_ratio > 0 (or leave it out)")
     return float(share), ratio * return_velocity
+
+
+def circulation(case: Case, z: np.ndarray, cell_height: float, return_velocity: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the outer zone's upflow per cell [m/s], its cells' exchange rate into the channel [1/s], the share of the
+    channel's turned droplets each cell takes [-]: where the plume gives slag back, in proportion) of the return
+    flow's circulation (popbal.closures.circulation_profile, exchange_rates; ``entrainment_length`` and
+    ``turning_length``); three empty arrays without them. Refuses (CaseError) either key without the other or
+    without a return flow."""
+    p = case.popbal
+    a, b = p.entrainment_length, p.turning_length
+    if a is None and b is None:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    if a is None or b is None:
+        key, missing = ("entrainment_length", "turning_length") if b is None else ("turning_length",
+                                                                                  "entrainment_length")
+        raise CaseError(f"popbal.{key} = {a if b is None else b!r}: needs popbal.{missing} (a number > 0, in column "
+                        "radii) as well: the circulation's profile takes both")
+    if not return_velocity > 0.0:
+        raise CaseError(f"popbal.entrainment_length = {a!r}: shapes a return flow this case does not have; allowed "
+                        "only with popbal.return_flow_ratio > 0 (or leave it out)")
+    upflow = return_velocity * closures.circulation_profile(z, case.geometry.height, column_radius(case), a, b)
+    rates = closures.exchange_rates(upflow, cell_height)
+    given = np.maximum(-rates, 0.0)  # cell 0's is the upflow through its top: the slag turning over the floor
+    return upflow, np.maximum(rates, 0.0), given / given.sum()
 
 
 def bottom_turning(case: Case, bottom_thickness: float, return_velocity: float) -> float:

@@ -300,6 +300,16 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                               "turns; popbal.closures); absent or 0: none turns (without a bottom "
                                               "layer the whole 1 - min(1, U_h / u_up) turns).", 0.0, 1.0,
                                       optional=True),
+        "entrainment_length": Field(F, "-", "With a return flow: the outer zone's upflow is u_up s(z) with s = "
+                                            "(1 - exp(-(H - z) / (a R))) (1 - exp(-z / (b R))) over its peak, a = "
+                                            "entrainment_length and b = turning_length in column radii R, and the "
+                                            "plume takes the outer zone's droplets into the channel where the upflow "
+                                            "falls with height, at the slag's rate (popbal.closures); absent: u_up "
+                                            "at every height, droplets leaving only at the roof.", 0.0,
+                                    exclusive_minimum=True, optional=True),
+        "turning_length": Field(F, "-", "b of entrainment_length's profile: the return flow starts over about b "
+                                        "column radii above the floor (needed with entrainment_length).", 0.0,
+                                exclusive_minimum=True, optional=True),
         "axis_velocity_ratio": Field(F, "-", "Slag velocity on the channel axis (the channel_velocity output) / the "
                                              "plume velocity u_c that carries the droplets; absent: 1.", 0.0,
                                      exclusive_minimum=True, optional=True),

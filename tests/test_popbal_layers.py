@@ -340,6 +340,61 @@ def test_turned_droplets_recirculate_and_the_bottom_layer_passes_the_feed_alone(
         pytest.approx(np.polyfit(late["time"], late["mass_fed"], 1)[0], rel=1e-3)
 
 
+@pytest.fixture(scope="module")
+def circulating():
+    # the turn above, and the circulation's profile: the upflow u_up s(z) over the whole height faster than the droplets
+    # (entrainment over 0.2 R under the lid, turning over 0.05 R above the floor), the plume entraining the
+    # outer zone's droplets above the peak; no hindrance, so that a droplet's velocity is its own everywhere
+    model = popbal.setup("demo", SINGLE_SIZE + LAYERS + [f"popbal.bottom_turning_share={TURNING}",
+                                                          "popbal.return_flow_ratio=0.5", "popbal.hindered_exponent=0",
+                                                          "popbal.entrainment_length=0.2",
+                                                          "popbal.turning_length=0.05",
+                                                          "popbal.end_time=400", "popbal.output_interval=20"])
+    return model, popbal.run(model, progress=False)
+
+
+def test_the_circulation_keeps_the_outer_zones_content_uniform_where_the_plume_entrains(circulating):
+    """Steady, every turned droplet comes back to the channel (entrained at its height or over the roof), so the
+    channel passes N / (1 - t) and the outer zone takes in t N / (1 - t), t = T (1 - U / u_up), shared over the
+    cells below the upflow's peak as the slag they take from the plume: the droplet flux c_j (u_j - U) up through
+    cell j is that inflow per unit area times the share taken at or below j; above the peak the plume takes the
+    droplets at the slag's rate, so c stays at its value at the peak (popbal.closures, the circulation). And the
+    mass is kept."""
+    model, result = circulating
+    case = model.case
+    own = settling_velocity(case, case.feed.mean_diameter)
+    upflow = model.return_upflow
+    assert upflow.min() > own and upflow.max() == pytest.approx(model.return_velocity, rel=1e-3)
+    rate = float(model.feed_number_rate.sum())
+    t = TURNING * (1.0 - own / model.return_velocity)
+    flux = t * rate / ((1.0 - t) * model.zone_area[OUTER])
+    number = result.arrays["number_density"][-1][OUTER].sum(axis=1)
+    peak = int(np.argmax(upflow))
+    print(f"\ncirculation: peak at cell {peak} of {model.cells}; flux below it over the inflow "
+          f"{number[:peak + 1] * (upflow[:peak + 1] - own) / flux}; above it {number[peak:].min():.6g}-{number[peak:].max():.6g}")
+    assert 3 <= peak <= model.cells - 4
+    taken = np.cumsum(model.turning_weight)[:peak + 1]
+    assert taken[-1] == pytest.approx(1.0, rel=1e-12) and model.turning_weight[1] > 0.0
+    assert number[:peak + 1] * (upflow[:peak + 1] - own) == pytest.approx(flux * taken, rel=1e-4)
+    assert number[peak:] == pytest.approx(np.full(model.cells - peak, number[peak]), rel=1e-4)
+    assert model.exchange_rate[peak + 1:].min() > 0.0 and not model.exchange_rate[:peak + 1].any()
+    series = result.timeseries
+    assert np.abs(series["mass_balance_error"]).max() < 1e-10
+    late = series[series["time"] >= 300.0]
+    assert np.polyfit(late["time"], late["mass_settled"], 1)[0] == \
+        pytest.approx(np.polyfit(late["time"], late["mass_fed"], 1)[0], rel=1e-3)
+
+
+@pytest.mark.parametrize("overrides, names", [
+    (["popbal.entrainment_length=1"], "needs popbal.turning_length"),
+    (["popbal.turning_length=0.5"], "needs popbal.entrainment_length"),
+    (["popbal.entrainment_length=1", "popbal.turning_length=0.5", "popbal.return_flow_ratio=0"], "return_flow_ratio"),
+])
+def test_the_circulation_keys_alone_or_without_a_return_flow_are_refused(overrides, names):
+    with pytest.raises(CaseError, match=names):
+        popbal.setup("demo", SINGLE_SIZE + overrides)
+
+
 @pytest.mark.parametrize("overrides, names", [
     (["popbal.bottom_turning_share=0.5"], "bottom_layer_factor"),
     (["popbal.bottom_turning_share=0.5", "popbal.bottom_layer_factor=1", "popbal.return_flow_ratio=0",

@@ -5,12 +5,15 @@ import numpy as np
 import pytest
 
 import popbal
+from popbal import closures
 from popbal.closures import return_velocity, settling_share
 from popbal.kernels import QUANTITIES, transport_two_way, transport_zone
 
 
-def _work(cells):
-    return np.zeros(cells), np.zeros(cells), np.zeros(cells)
+def _work(cells, sections, loss=None, lateral=None):
+    """The kernel's work space, its sideways loss rate (none by default) and the array that books it."""
+    return (np.zeros(cells), np.zeros(cells), np.zeros(cells), np.zeros(cells) if loss is None else loss,
+            np.zeros((cells, QUANTITIES, sections)) if lateral is None else lateral)
 
 
 def test_two_way_transport_equals_the_one_way_kernel_when_every_velocity_points_down():
@@ -25,7 +28,7 @@ def test_two_way_transport_equals_the_one_way_kernel_when_every_velocity_points_
     out_two = np.zeros((3, QUANTITIES, sections))
     transport_zone(one, velocity, sink, source, dz, dt, out_one[0], out_one[1])
     transport_two_way(two, velocity, sink, source, np.zeros((QUANTITIES, sections)), dz, dt, out_two[0], out_two[1],
-                      out_two[2], *_work(cells))
+                      out_two[2], *_work(cells, sections))
     assert np.allclose(two, one, rtol=1e-12, atol=0.0)
     assert np.allclose(out_two[0], out_one[0], rtol=1e-12) and np.allclose(out_two[2], out_one[1], rtol=1e-12)
     assert not out_two[1].any()
@@ -45,11 +48,14 @@ def test_two_way_transport_solves_its_implicit_system_and_conserves_with_mixed_s
     top, bottom_source = rng.uniform(0.0, 1.0, (2, QUANTITIES, sections))
     new = content.copy()
     bottom_out, top_out, sink_out = np.zeros((3, QUANTITIES, sections))
-    transport_two_way(new, velocity, sink, top, bottom_source, dz, dt, bottom_out, top_out, sink_out, *_work(cells))
+    loss = rng.uniform(0.0, 0.2, cells)  # the plume's entrainment: a sideways loss, booked per cell
+    lateral = np.zeros((cells, QUANTITIES, sections))
+    transport_two_way(new, velocity, sink, top, bottom_source, dz, dt, bottom_out, top_out, sink_out,
+                      *_work(cells, sections, loss, lateral))
     c = dt / dz
     for k in range(sections):
         v = velocity[:, k]
-        a = np.diag(1.0 + c * np.abs(v) + dt * sink)
+        a = np.diag(1.0 + c * np.abs(v) + dt * sink + dt * loss)
         for j in range(cells):
             if j + 1 < cells:
                 a[j, j + 1] = -c * max(v[j + 1], 0.0)
@@ -61,9 +67,54 @@ def test_two_way_transport_solves_its_implicit_system_and_conserves_with_mixed_s
             rhs[0] += dt * bottom_source[q, k]
             assert np.allclose(new[:, q, k], np.linalg.solve(a, rhs), rtol=1e-12)
     before = content.sum(axis=0) * dz + dt * (top + bottom_source) * dz
-    after = new.sum(axis=0) * dz + bottom_out + top_out + sink_out
+    after = new.sum(axis=0) * dz + bottom_out + top_out + sink_out + lateral.sum(axis=0) * dz
     assert np.allclose(before, after, rtol=1e-13)
+    assert np.allclose(lateral, dt * loss[:, None, None] * new, rtol=1e-13)
     assert np.all(new >= 0.0) and top_out.min() > 0.0 and bottom_out.min() > 0.0
+
+
+def test_entrainment_keeps_the_slags_continuity_so_uniform_content_stays_uniform():
+    """Droplets that follow the slag (no settling) in an upflow that falls with height, the plume entraining e_j =
+    (u_{j-1} - u_j) / dz of each cell per second (popbal.closures.exchange_rates) and the slag coming in through the
+    bottom as full as the cells: the content stays uniform whatever the step, the cells lose dt e_j c sideways and
+    the top passes dt u_top c."""
+    cells, sections, dz, dt = 12, 2, 0.005, 0.7
+    upflow = 4e-3 * closures.circulation_profile((np.arange(cells) + 0.5) * dz, cells * dz, 0.034, 1.0, 0.05)
+    rates = closures.exchange_rates(upflow, dz)
+    assert rates[0] < 0.0 and np.all(rates[np.argmax(upflow) + 1:] > 0.0)
+    content = np.full((cells, QUANTITIES, sections), 2.5)
+    velocity = np.repeat(-upflow[:, None], sections, axis=1)
+    bottom_source = np.full((QUANTITIES, sections), upflow[0] * 2.5 / dz)  # through the floor face, u_0 c / dz
+    lateral = np.zeros((cells, QUANTITIES, sections))
+    bottom_out, top_out, sink_out = np.zeros((3, QUANTITIES, sections))
+    rising = upflow >= np.concatenate([[0.0], upflow[:-1]])
+    assert rising[: np.argmax(upflow) + 1].all()  # the cells up to the peak gain slag: give it them as full
+    gains = np.where(rising, -rates, 0.0)
+    gains[0] = 0.0  # cell 0's comes through the floor face (bottom_source)
+    content_before = content.copy()
+    content += dt * gains[:, None, None] * 2.5  # the slag given back below the peak, as full, explicitly
+    transport_two_way(content, velocity, np.zeros(cells), np.zeros((QUANTITIES, sections)), bottom_source, dz, dt,
+                      bottom_out, top_out, sink_out, *_work(cells, sections, np.maximum(rates, 0.0), lateral))
+    # the gain, added before the implicit transport at the uniform value that is the solution, keeps it exactly too
+    assert content == pytest.approx(content_before, rel=1e-12)
+    expected = np.broadcast_to(dt * np.maximum(rates, 0.0)[:, None, None] * 2.5, lateral.shape)
+    assert lateral == pytest.approx(expected, rel=1e-12, abs=1e-300)
+    assert top_out == pytest.approx(dt * upflow[-1] * 2.5, rel=1e-12)
+
+
+def test_circulation_profile_peaks_at_one_and_vanishes_at_the_lid_and_floor():
+    height, radius = 0.1, 0.0564
+    z = np.linspace(0.0, height, 11)
+    s = closures.circulation_profile(z, height, radius, 1.12, 0.54)
+    fine = np.linspace(0.0, height, 200_001)
+    peak = (-np.expm1(-(height - fine) / (1.12 * radius)) * -np.expm1(-fine / (0.54 * radius))).max()
+    expected = -np.expm1(-(height - z) / (1.12 * radius)) * -np.expm1(-z / (0.54 * radius)) / peak
+    assert s == pytest.approx(expected, rel=1e-5)  # its own peak is the largest of 2001 samples
+    assert s[0] == 0.0 and s[-1] == 0.0
+    assert closures.circulation_profile(fine, height, radius, 1.12, 0.54).max() == pytest.approx(1.0, rel=1e-5)
+    assert 0.3 < z[np.argmax(s)] / height < 0.5  # the continued demo_cell_25's Q_down peaks at 0.39 H
+    rates = closures.exchange_rates(np.array([1.0, 3.0, 2.0, 0.5]), 0.01)
+    assert rates == pytest.approx([-100.0, -200.0, 100.0, 150.0])
 
 
 def test_return_flow_closure_values():
