@@ -359,12 +359,14 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
         else:
             transport_zone(content[zone], work.velocities[zone], model.sink_rate, work.top_source, dz, dt,
                            work.bottom_out, work.sink_out)
+            # the outer zone's droplets' own hindered settling velocity U_h: its velocity in the bottom cell plus
+            # the upflow there (u_up, or u_up s(z) with the circulation's profile)
+            upflow = model.return_upflow[0] if model.return_upflow.size else model.return_velocity
             if model.return_velocity > 0.0 and not model.bottom:  # the channel: a share settles, the rest turns
-                share = settling_share(work.velocities[OUTER, 0] + model.return_velocity, model.return_velocity)
+                share = settling_share(work.velocities[OUTER, 0] + upflow, model.return_velocity)
                 work.turned[:] = work.bottom_out * (1.0 - share)[None, :] * area
                 work.bottom_out *= share[None, :]
             elif p["bottom_turning"] > 0.0 and zone == CHANNEL:  # a share of the slow ones turns, the rest goes down
-                upflow = model.return_upflow[0] if model.return_upflow.size else model.return_velocity
                 turning = p["bottom_turning"] * (1.0 - settling_share(work.velocities[OUTER, 0] + upflow,
                                                                       model.return_velocity))
                 work.turned[:] = work.bottom_out * turning[None, :] * area

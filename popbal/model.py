@@ -348,7 +348,7 @@ def circulation(case: Case, z: np.ndarray, cell_height: float, return_velocity: 
                         "only with popbal.return_flow_ratio > 0 (or leave it out)")
     upflow = return_velocity * closures.circulation_profile(z, case.geometry.height, column_radius(case), a, b)
     rates = closures.exchange_rates(upflow, cell_height)
-    given = np.maximum(-rates, 0.0)  # cell 0's is the upflow through its top: the slag turning over the floor
+    given = np.maximum(-rates, 0.0)  # cell 0's: the slag turning over the floor into it
     return upflow, np.maximum(rates, 0.0), given / given.sum()
 
 
