@@ -150,15 +150,10 @@ def cell_shear_rates(centres, velocity) -> tuple[np.ndarray, float]:
     a slag snapshot given as cell ``centres`` (n, 3) [m] and ``velocity`` (n, 3) [m/s] on a uniform grid, by central
     differences (one-sided at the walls): (G on the grid (nx, ny, nz), the cell edge [m]). ValueError for a grid
     that is not three-dimensional (a stored reference keeps one plane of the slag)."""
-    centres = np.asarray(centres, dtype=float)
-    axes = [np.unique(np.round(centres[:, k], 12)) for k in range(3)]
-    shape = tuple(len(x) for x in axes)
-    if min(shape) < 2 or np.prod(shape) != len(centres):
-        raise ValueError(f"slag grid of {len(centres)} cells with {shape} distinct coordinates: the shear rate needs "
-                         "the whole three-dimensional grid (a run folder's fluid snapshot, not a stored plane)")
+    from .files import slag_grid
+
+    axes, v = slag_grid(centres, velocity)
     edge = float(axes[0][1] - axes[0][0])
-    order = np.lexsort((centres[:, 2], centres[:, 1], centres[:, 0]))
-    v = np.asarray(velocity, dtype=float)[order].reshape(*shape, 3)
     grad = np.stack([np.stack(np.gradient(v[..., i], *[x[1] - x[0] for x in axes]), axis=-1) for i in range(3)],
                     axis=-2)  # [..., i, j] = d v_i / d x_j
     strain = 0.5 * (grad + np.swapaxes(grad, -1, -2))

@@ -42,24 +42,16 @@ LAYER_SHARE = 0.1
 BANDS = 10
 
 
-def _window_times(run, window):
-    from .steady import window_of
-
-    window = window or window_of(run.timeseries)[0]
-    times = [float(t) for t in run.snapshot_times() if window[0] - 1e-9 <= t <= window[1] + 1e-9]
-    return (float(window[0]), float(window[1])), times
-
-
 def _slag_grid(run, time):
-    """(x, y, z cell-centre axes [m], vertical slag velocity (nz, ny, nx) [m/s]) of the snapshot at ``time``."""
+    """(x, y, z cell-centre axes [m], vertical slag velocity (nx, ny, nz) [m/s]) of the snapshot at ``time``."""
+    from .files import slag_grid
+
     _, centres, velocity = run.slag(time)
-    axes = [np.unique(centres[:, i]) for i in range(3)]
-    if min(len(a) for a in axes) < 2:
-        raise ValueError(f"the slag snapshot at t = {time:g} s is not a whole grid (a stored reference keeps one "
-                         "plane); use the run's own folder")
-    order = np.lexsort((centres[:, 0], centres[:, 1], centres[:, 2]))  # z slowest, then y, x fastest
-    w = velocity[order, 2].reshape(len(axes[2]), len(axes[1]), len(axes[0]))
-    return axes, w
+    try:
+        axes, grid = slag_grid(centres, velocity)
+    except ValueError as exc:
+        raise ValueError(f"the slag snapshot at t = {time:g} s: {exc}") from None
+    return axes, grid[..., 2]
 
 
 def downflux_profile(run, times) -> pd.DataFrame:
@@ -70,8 +62,8 @@ def downflux_profile(run, times) -> pd.DataFrame:
     for time in times:
         (xs, ys, zs), w = _slag_grid(run, time)
         area = (xs[1] - xs[0]) * (ys[1] - ys[0])
-        q = -np.where(w < 0.0, w, 0.0).sum(axis=(1, 2)) * area
-        s = (w < 0.0).mean(axis=(1, 2))
+        q = -np.where(w < 0.0, w, 0.0).sum(axis=(0, 1)) * area
+        s = (w < 0.0).mean(axis=(0, 1))
         total, share = (q, s) if total is None else (total + q, share + s)
     if total is None:
         raise ValueError("no slag snapshot in the window")
@@ -87,7 +79,7 @@ def droplet_regions(run, time) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
         raise ValueError(f"the droplet snapshot at t = {time:g} s carries no idents")
     index = [np.clip(np.floor((np.asarray(d[key]) - axis[0]) / (axis[1] - axis[0]) + 0.5).astype(int), 0,
                      len(axis) - 1) for key, axis in (("x", xs), ("y", ys), ("z", zs))]
-    rising = w[index[2], index[1], index[0]] > 0.0
+    rising = w[index[0], index[1], index[2]] > 0.0
     height = run.case.geometry.height
     z = np.asarray(d["z"], dtype=float)
     region = np.where(rising, REGIONS.index("up"), REGIONS.index("down"))
@@ -153,9 +145,10 @@ def measure_circulation(run, window: tuple[float, float] | None = None, lag: int
     steady window, else its last third): {"window", "snapshots", "downflux" (:func:`downflux_profile`), "flows",
     "occupancy", "heights" (:func:`region_flows`)}."""
     from .runs import load_run
+    from .steady import window_snapshots
 
     run = run if hasattr(run, "timeseries") else load_run(run)
-    window, times = _window_times(run, window)
+    window, times = window_snapshots(run, window)
     flows, occupancy, heights = region_flows(run, times, lag)
     return {"window": window, "snapshots": times, "downflux": downflux_profile(run, times), "flows": flows,
             "occupancy": occupancy, "heights": heights, "lag": lag}
@@ -194,6 +187,7 @@ def main(argv=None) -> int:
     from settler.errors import OutputError
 
     from .files import NoData
+    from .steady import parse_window
 
     parser = argparse.ArgumentParser(prog="python -m analysis.circulation",
                                      description="the return flow's circulation in a full run: the slag the plume "
@@ -204,16 +198,11 @@ def main(argv=None) -> int:
     parser.add_argument("--lag", type=int, default=1,
                         help="follow each droplet to the snapshot this many snapshots later (default: 1)")
     args = parser.parse_args(argv)
-    window = None
-    if args.window:
-        try:
-            window = tuple(float(x) for x in args.window.split(":"))
-            if len(window) != 2 or not window[0] < window[1]:
-                raise ValueError
-        except ValueError:
-            print(f"{parser.prog}: error: --window {args.window!r}: allowed START:END in seconds, START < END",
-                  file=sys.stderr)
-            return 2
+    try:
+        window = parse_window(args.window) if args.window else None
+    except ValueError as exc:
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        return 2
     try:
         result = measure_circulation(args.run, window, args.lag)
     except (ValueError, NoData, OutputError) as exc:

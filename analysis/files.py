@@ -115,6 +115,20 @@ def droplets_file(path) -> pd.DataFrame:
     return frame
 
 
+def slag_grid(centres, velocity) -> tuple[list[np.ndarray], np.ndarray]:
+    """(the x, y, z cell-centre axes [m], the velocity on the grid (nx, ny, nz, 3) [m/s]) of a slag snapshot given as
+    cell ``centres`` (n, 3) [m] and ``velocity`` (n, 3) [m/s] (:func:`slag_file`) on a uniform grid. ValueError for
+    cells that do not fill a three-dimensional grid (a stored reference keeps one plane of the slag)."""
+    centres = np.asarray(centres, dtype=float)
+    axes = [np.unique(np.round(centres[:, k], 12)) for k in range(3)]
+    shape = tuple(len(x) for x in axes)
+    if min(shape) < 2 or np.prod(shape) != len(centres):
+        raise ValueError(f"slag grid of {len(centres)} cells with {shape} distinct coordinates: this needs the whole "
+                         "three-dimensional grid (a run folder's fluid snapshot, not a stored plane)")
+    order = np.lexsort((centres[:, 2], centres[:, 1], centres[:, 0]))  # x slowest, z fastest
+    return axes, np.asarray(velocity, dtype=float)[order].reshape(*shape, 3)
+
+
 def slag_file(path) -> tuple[np.ndarray, np.ndarray]:
     """(cell centres (n, 3) [m], cell velocity (n, 3) [m/s]) of one slag snapshot file: ``fluid_NNNNN.vti`` (image
     data, :mod:`settler.vti`) or, from runs made before it, ``fluid_NNNNN.vtu`` (hexahedra; a cell's centre is the

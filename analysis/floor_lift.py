@@ -157,11 +157,10 @@ def measure_floor_lift(run, window: tuple[float, float] | None = None) -> tuple[
     from settler.derived import settling_velocity
 
     from .runs import load_run
-    from .steady import window_of
+    from .steady import window_snapshots
 
     run = run if hasattr(run, "timeseries") else load_run(run)
-    window = window or window_of(run.timeseries)[0]
-    times = [float(t) for t in run.snapshot_times() if window[0] - 1e-9 <= t <= window[1] + 1e-9]
+    window, times = window_snapshots(run, window)
     snapshots = [(t, run.droplets(t)[1]) for t in times]
     table, _ = lift_counts(snapshots, run.case.geometry.height)
     diameter = table["mean_diameter"].to_numpy()
@@ -223,22 +222,19 @@ def main(argv=None) -> int:
 
     from settler.errors import OutputError
 
+    from .steady import parse_window
+
     parser = argparse.ArgumentParser(prog="python -m analysis.floor_lift",
                                      description="what the return flow lifts off the floor of full runs, by size "
                                                  "(the measure of popbal's bottom_lift_share)")
     parser.add_argument("runs", nargs="+", help="full run folders (a stored reference keeps too few snapshots)")
     parser.add_argument("--window", help="START:END [s]; default each run's steady window, else its last third")
     args = parser.parse_args(argv)
-    window = None
-    if args.window:
-        try:
-            window = tuple(float(x) for x in args.window.split(":"))
-        except ValueError:
-            window = ()
-        if len(window) != 2 or not window[0] < window[1]:
-            print(f"{parser.prog}: --window {args.window!r}: allowed START:END in seconds, START < END",
-                  file=sys.stderr)
-            return 2
+    try:
+        window = parse_window(args.window) if args.window else None
+    except ValueError as exc:
+        print(f"{parser.prog}: {exc}", file=sys.stderr)
+        return 2
     for folder in args.runs:
         try:
             table, meta = measure_floor_lift(folder, window)

@@ -55,3 +55,23 @@ def window_of(series: pd.DataFrame) -> tuple[tuple[float, float], bool]:
     if math.isfinite(found["start"]):
         return (float(found["start"]), end), True
     return (end * 2.0 / 3.0, end), False
+
+
+def window_snapshots(run, window: tuple[float, float] | None = None) -> tuple[tuple[float, float], list[float]]:
+    """(the window [s], the times [s] of ``run``'s snapshots within it): ``window`` (default: :func:`window_of`
+    the run's time series, its steady window else its last third). ``run`` is an :class:`analysis.Run`."""
+    window = window or window_of(run.timeseries)[0]
+    times = [float(t) for t in run.snapshot_times() if window[0] - 1e-9 <= t <= window[1] + 1e-9]
+    return (float(window[0]), float(window[1])), times
+
+
+def parse_window(text: str) -> tuple[float, float]:
+    """The ``--window START:END`` of a command line as (start, end) [s]; ValueError naming the value and what is
+    allowed (START:END in seconds, START < END)."""
+    try:
+        window = tuple(float(x) for x in text.split(":"))
+    except ValueError:
+        window = ()
+    if len(window) != 2 or not window[0] < window[1]:
+        raise ValueError(f"--window {text!r}: allowed START:END in seconds, START < END")
+    return window
