@@ -214,9 +214,9 @@ height, and each cell passes e_j c_j per second into the channel's cell at its h
 (:func:`exchange_rates`), inside the implicit transport (popbal.kernels.transport_two_way), so the exchange keeps
 the slag's continuity exactly; where e_j < 0 the slag the plume gives back enters, carrying the droplets that
 ``bottom_turning_share`` turns out of the channel's bottom outflow, shared over those cells in proportion to the
-slag each takes (in the full run they pass into rising slag at 10-50 mm, not at the floor). a and b are measured on the slag alone (Q_down's shape):
-1.12 and 0.54 on the continued demo_cell_25, 0.64 and 0.34 in cubic, 0.72 and 0.38 in the 5 mm demo; the tall
-columns give slag back all along the height, which the form does not hold.
+slag each takes (in the full run they pass into rising slag at 10-50 mm, not at the floor). a and b are measured on
+the slag alone (Q_down's shape): 1.12 and 0.54 on the continued demo_cell_25, 0.64 and 0.34 in cubic, 0.72 and 0.38
+in the 5 mm demo; the tall columns give slag back all along the height, which the form does not hold.
 
 Both layers integrate dc/dt = inflow - (v / h) c exactly over a step (popbal.driver), so their steady states hold
 whatever the step; tests/test_popbal_layers.py checks both against their closed forms (the bottom layer's with and

@@ -65,6 +65,16 @@ def test_roof_layer_holds_its_closed_form_volume_fraction(steady):
         == pytest.approx(C_L, rel=1e-12)
 
 
+def _assert_mass_kept_and_the_feed_settles(result, after=300.0):
+    """The matte balance holds to round-off over the run, and from ``after`` [s] on the matte settles at the rate it
+    is fed (the layers and the return flow at steady state)."""
+    series = result.timeseries
+    assert np.abs(series["mass_balance_error"]).max() < 1e-10
+    late = series[series["time"] >= after]
+    assert np.polyfit(late["time"], late["mass_settled"], 1)[0] == \
+        pytest.approx(np.polyfit(late["time"], late["mass_fed"], 1)[0], rel=1e-3)
+
+
 def _bottom_closed_form(model, push=0.0, lifted=0.0):
     """The steady bottom layer's phi with phi (U_h(phi) + push) (1 - lifted) = Q / A_box: the single fed size's
     hindered settling plus a drainage velocity push [m/s], a share ``lifted`` of what leaves it going back up (so
@@ -278,11 +288,7 @@ def test_lifted_droplets_recirculate_through_the_return_flow_as_their_closed_for
     assert got == pytest.approx(expected, rel=1e-4)
     assert expected > 1.2 * unlifted  # the lift matters here
     assert outer == pytest.approx(outer_expected, rel=1e-4)
-    series = result.timeseries
-    assert np.abs(series["mass_balance_error"]).max() < 1e-10
-    late = series[series["time"] >= 300.0]
-    assert np.polyfit(late["time"], late["mass_settled"], 1)[0] == \
-        pytest.approx(np.polyfit(late["time"], late["mass_fed"], 1)[0], rel=1e-3)
+    _assert_mass_kept_and_the_feed_settles(result)
 
 
 def test_lift_share_falls_with_the_droplets_settling_velocity_over_the_upflow():
@@ -333,11 +339,7 @@ def test_turned_droplets_recirculate_and_the_bottom_layer_passes_the_feed_alone(
     assert got == pytest.approx(expected, rel=1e-4)
     assert outer == pytest.approx(outer_expected, rel=1e-4)
     assert outer > 0.5 * t / (1.0 - t) * q / (model.zone_area[OUTER] * u_up)  # the turn matters here
-    series = result.timeseries
-    assert np.abs(series["mass_balance_error"]).max() < 1e-10
-    late = series[series["time"] >= 300.0]
-    assert np.polyfit(late["time"], late["mass_settled"], 1)[0] == \
-        pytest.approx(np.polyfit(late["time"], late["mass_fed"], 1)[0], rel=1e-3)
+    _assert_mass_kept_and_the_feed_settles(result)
 
 
 @pytest.fixture(scope="module")
@@ -371,18 +373,15 @@ def test_the_circulation_keeps_the_outer_zones_content_uniform_where_the_plume_e
     number = result.arrays["number_density"][-1][OUTER].sum(axis=1)
     peak = int(np.argmax(upflow))
     print(f"\ncirculation: peak at cell {peak} of {model.cells}; flux below it over the inflow "
-          f"{number[:peak + 1] * (upflow[:peak + 1] - own) / flux}; above it {number[peak:].min():.6g}-{number[peak:].max():.6g}")
+          f"{number[:peak + 1] * (upflow[:peak + 1] - own) / flux}; above it {number[peak:].min():.6g}-"
+          f"{number[peak:].max():.6g}")
     assert 3 <= peak <= model.cells - 4
     taken = np.cumsum(model.turning_weight)[:peak + 1]
     assert taken[-1] == pytest.approx(1.0, rel=1e-12) and model.turning_weight[1] > 0.0
     assert number[:peak + 1] * (upflow[:peak + 1] - own) == pytest.approx(flux * taken, rel=1e-4)
     assert number[peak:] == pytest.approx(np.full(model.cells - peak, number[peak]), rel=1e-4)
     assert model.exchange_rate[peak + 1:].min() > 0.0 and not model.exchange_rate[:peak + 1].any()
-    series = result.timeseries
-    assert np.abs(series["mass_balance_error"]).max() < 1e-10
-    late = series[series["time"] >= 300.0]
-    assert np.polyfit(late["time"], late["mass_settled"], 1)[0] == \
-        pytest.approx(np.polyfit(late["time"], late["mass_fed"], 1)[0], rel=1e-3)
+    _assert_mass_kept_and_the_feed_settles(result)
 
 
 def test_the_circulation_without_a_bottom_layer_turns_the_slow_droplets_where_the_plume_gives_slag_back():
