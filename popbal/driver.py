@@ -64,6 +64,16 @@ DISTRIBUTION_ARRAYS: dict[str, tuple[str, str]] = {
     "lost_mass": ("kg", "(T, K) matte mass lost with the slag since t = 0, per section"),
     "merges": ("-", "(T, Z, J) coalescence events since t = 0 in each zone's cells (the droplets coalescence removed; "
                     "the roof layer's in its top cell, the bottom layer's in its bottom cell)"),
+    "exchanges": ("-", "(T, X) droplets passed since t = 0 along each of the return flow's paths (X: EXCHANGES)"),
+}
+
+#: The return flow's paths between zones, in the order of the ``exchanges`` array: name -> meaning. The full runs'
+#: counterparts are analysis.circulation's flows between rising slag, sinking slag, the floor and the roof.
+EXCHANGES: dict[str, str] = {
+    "floor_to_outer": "lifted off the bottom layer into the outer zone (bottom_lift_share)",
+    "channel_to_outer": "turned from the channel's bottom outflow into the outer zone (the return flow's turning)",
+    "outer_to_channel": "entrained from the outer zone into the channel (entrainment_length)",
+    "outer_to_top": "risen out of the outer zone's top cell into the roof layer (or the channel's top cell)",
 }
 
 
@@ -116,6 +126,29 @@ class Result:
             fraction = np.where(fed > 0.0, lost / fed, np.nan)
         return pd.DataFrame({"original_diameter": self.arrays["original_diameter"], "fed_mass": fed,
                              "settled_mass": settled, "lost_mass": lost, "loss_fraction": fraction})
+
+    def zone_exchange(self, start: float, end: float) -> dict[str, float]:
+        """The return flow's exchanges over the outputs in [start, end] [s]: droplets per second along each path of
+        :data:`EXCHANGES`, ``outer_merged`` (coalescence events in the outer zone per second), ``outer_count`` (the
+        outer zone's droplets, mean over the outputs) and ``outer_residence`` [s] (that count over the rate at which
+        droplets enter it from the floor and the channel; at steady state the rate at which they leave). NaN without
+        the arrays or with fewer than two outputs in the window."""
+        t = self.arrays["time"]
+        inside = np.flatnonzero((t >= start - 1e-9) & (t <= end + 1e-9))
+        if "exchanges" not in self.arrays or inside.size < 2:
+            return {name: math.nan for name in (*EXCHANGES, "outer_merged", "outer_count", "outer_residence")}
+        first, last = inside[0], inside[-1]
+        span = t[last] - t[first]
+        rates = (self.arrays["exchanges"][last] - self.arrays["exchanges"][first]) / span
+        out = dict(zip(EXCHANGES, map(float, rates)))
+        merges = self.arrays["merges"][:, OUTER].sum(axis=1)
+        out["outer_merged"] = float(merges[last] - merges[first]) / float(span)
+        volume = self.arrays["zone_area"][OUTER] * self.model.cell_height
+        counts = self.arrays["number_density"][inside, OUTER].sum(axis=(1, 2)) * volume
+        out["outer_count"] = float(counts.mean())
+        inflow = out["floor_to_outer"] + out["channel_to_outer"]
+        out["outer_residence"] = out["outer_count"] / inflow if inflow > 0.0 else math.nan
+        return out
 
     def merges_by_height(self) -> pd.DataFrame:
         """The coalescence events since t = 0 at every output in the height bands of
@@ -236,6 +269,7 @@ class _Books:
         self.reacted = 0.0
         self.merges = np.zeros((len(ZONES), cells))
         self.merges_reported = 0.0
+        self.exchanges = np.zeros(len(EXCHANGES))  # droplets along each path of EXCHANGES
 
 
 def _mass(model: Model, amounts: np.ndarray) -> np.ndarray:
@@ -326,7 +360,7 @@ def _snapshot(model: Model, content: np.ndarray, work: _Work, books: _Books, t: 
               "fed_number": books.fed[NUMBER].copy(), "settled_number": books.settled[NUMBER].copy(),
               "lost_number": books.lost[NUMBER].copy(), "fed_mass": _mass(model, books.fed),
               "settled_mass": _mass(model, books.settled), "lost_mass": _mass(model, books.lost),
-              "merges": books.merges.copy()}
+              "merges": books.merges.copy(), "exchanges": books.exchanges.copy()}
     return row, arrays
 
 
@@ -366,11 +400,13 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
                 share = settling_share(work.velocities[OUTER, 0] + upflow, model.return_velocity)
                 work.turned[:] = work.bottom_out * (1.0 - share)[None, :] * area
                 work.bottom_out *= share[None, :]
+                books.exchanges[1] += work.turned[NUMBER].sum()
             elif p["bottom_turning"] > 0.0 and zone == CHANNEL:  # a share of the slow ones turns, the rest goes down
                 turning = p["bottom_turning"] * (1.0 - settling_share(work.velocities[OUTER, 0] + upflow,
                                                                       model.return_velocity))
                 work.turned[:] = work.bottom_out * turning[None, :] * area
                 work.bottom_out *= (1.0 - turning)[None, :]
+                books.exchanges[1] += work.turned[NUMBER].sum()
             _reach_floor(model, work, books, area)
         books.lost += work.sink_out * area
         if p["coalescence"]:
@@ -409,6 +445,8 @@ def _return_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
                       model.exchange_rate if entraining else work.no_loss, work.lateral_out)
     if entraining:  # the plume takes the entrained droplets into the channel's cell at their height
         content[CHANNEL] += work.lateral_out * (area / model.zone_area[CHANNEL])
+        books.exchanges[2] += work.lateral_out[:, NUMBER].sum() * area * dz
+    books.exchanges[3] += work.top_out[NUMBER].sum() * area
     _reach_floor(model, work, books, area)
     rise_into = ROOF if model.roof else CHANNEL  # the risers rejoin the roof layer where there is one
     content[rise_into, -1] += work.top_out * area / (model.zone_area[rise_into] * dz)
@@ -455,6 +493,7 @@ def _bottom_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
         lifted = out * lift_share(own, p["bottom_lift"], p["bottom_lift_velocity"])[None, :]
         content[OUTER, 0] += lifted * volume / (model.zone_area[OUTER] * model.cell_height)
         out = out - lifted
+        books.exchanges[0] += lifted[NUMBER].sum() * volume
     books.settled += out * volume
 
 

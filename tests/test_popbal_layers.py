@@ -384,6 +384,31 @@ def test_the_circulation_keeps_the_outer_zones_content_uniform_where_the_plume_e
     _assert_mass_kept_and_the_feed_settles(result)
 
 
+
+@pytest.mark.parametrize("fixture, path", [("lifted", "floor_to_outer"), ("turned", "channel_to_outer"),
+                                           ("circulating", "channel_to_outer")])
+def test_zone_exchange_books_the_recirculating_flux_of_the_closed_forms(fixture, path, request):
+    """Result.zone_exchange counts the droplets along each of the return flow's paths. Steady, the share s of the
+    flux that passes the bottom layer (lifted: s = lambda) or leaves the channel's bottom (turned: s = t = T (1 - U /
+    u_up)) goes round once more, so N s / (1 - s) per second enter the outer zone (N the fed rate) and, none settling
+    against the upflow nor merging, as many leave it: over the roof, or into the channel where the plume entrains."""
+    model, result = request.getfixturevalue(fixture)
+    case = model.case
+    own = settling_velocity(case, case.feed.mean_diameter)
+    if fixture == "lifted":
+        share = LIFT
+    else:  # the outer zone's bottom cell is dilute enough here for U_h = U within the tolerance
+        share = TURNING * (1.0 - own / model.return_velocity)
+    rate = float(model.feed_number_rate.sum()) * share / (1.0 - share)
+    ex = result.zone_exchange(300.0, 400.0)
+    print(f"\n{fixture}: {ex}; expected {rate:.6g} per s")
+    assert ex[path] == pytest.approx(rate, rel=2e-3)
+    assert ex["outer_to_top"] + ex["outer_to_channel"] == pytest.approx(rate, rel=2e-3)
+    others = {"floor_to_outer", "channel_to_outer"} - {path}
+    assert all(ex[name] == 0.0 for name in others) and ex["outer_merged"] == 0.0
+    assert (ex["outer_to_channel"] > 0.1 * rate) == (fixture == "circulating")  # only the circulation entrains
+    assert ex["outer_residence"] == pytest.approx(ex["outer_count"] / rate, rel=2e-3)
+
 def test_the_circulation_without_a_bottom_layer_turns_the_slow_droplets_where_the_plume_gives_slag_back():
     """Without a bottom layer the channel's slow droplets all turn, 1 - U_h / u_up of them (U_h their own hindered
     settling, not shifted by the profile's smaller upflow over the floor): with the circulation they come in over the
