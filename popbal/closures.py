@@ -66,6 +66,18 @@ about 5 and 3 of these units, phi_p = 0.04-0.1. Below the neck the simple and cu
 the whole box (a uniform spread would give 80 mm), deep's stay within 3 mm of the axis: no radius law of a single
 plume gives both, which is why the channel_radius column is reported but not a target.
 
+The plume's dilution by its Reynolds number (``plume_dilution_reynolds`` Re_d, with the flux form; 2026-12-06).
+The remade set's resolved plumes do not hold one volume fraction: the plume core's phi_p (``zone_profile.csv``, the
+droplet volume within the half-volume radius at 0.3-0.7 of the height over the steady window) is 0.025-0.047 in
+deep's feed in 50 and 150 mm columns (Re ~0.4, a Stokes plume that keeps about the roof layer's concentration),
+0.021 and 0.013 in the demo at half and one times its feed at 2.5 mm cells (Re 2.2 and 4.3), 0.005 in simple and
+cubic (Re 18): the plume dilutes with the slag it entrains as it gains inertia. With Re = rho_s u_s R_c / mu taken
+at the radius that carries Q_ch at u_s with the measured phi_p, phi_p = k_R^-2 / (1 + Re / Re_d) describes these
+seven training runs within 19 % rms (k_R 4.92, Re_d 2.3; :func:`analysis.calibration.hierarchy.dilution_from_zones`),
+where one volume fraction (the flux form alone) misses them by up to a factor of five. Not described: a plume
+that fills its column (deep's feed in the 20 mm column, phi_p 0.007), and the one-cell plumes of the demo's runs
+at 5 mm cells (phi_p 0.04-0.10 at Re 0.8-6), a grid effect (data/reference/README.md, grid study).
+
 Droplet transport and the plume Reynolds number (``plume_reynolds_scale`` Re_c). The droplets of the full runs do
 not all ride the plume at u_s: on the centreline they move at 0.41 (simple), 0.44 (cubic) and 0.91 (deep) of the
 slag's axis velocity. The plume Reynolds number Re = rho_s u_s R_c / mu is ~7 in simple and cubic (with the neck
@@ -325,6 +337,19 @@ def flux_channel_radius(volume_flux, velocity, radius_factor):
     (continuity at the plume volume fraction 1 / k_R^2); 0 without flux."""
     return radius_factor * math.sqrt(volume_flux / (math.pi * velocity)) if volume_flux > 0.0 and velocity > 0.0 \
         else 0.0
+
+
+def diluted_channel_radius(volume_flux, velocity, radius_factor, dilution_reynolds, density_slag, viscosity):
+    """The flux form's channel radius [m] with the plume's volume fraction diluted by its Reynolds number,
+    phi_p = k_R^-2 / (1 + Re / Re_d), Re = rho_s u_s R_c / mu (``plume_dilution_reynolds`` Re_d): continuity
+    pi R_c^2 u_s phi_p = Q_ch gives R_c^2 - b R_c - c = 0 with b = k_R^2 Q_ch rho_s / (pi mu Re_d) and
+    c = k_R^2 Q_ch / (pi u_s), whose positive root this is (:func:`flux_channel_radius` as Re_d -> infinity;
+    module docstring). 0 without flux."""
+    if not (volume_flux > 0.0 and velocity > 0.0):
+        return 0.0
+    b = radius_factor**2 * volume_flux * density_slag / (math.pi * viscosity * dilution_reynolds)
+    c = radius_factor**2 * volume_flux / (math.pi * velocity)
+    return 0.5 * (b + math.sqrt(b * b + 4.0 * c))
 
 
 def transport_factor(reynolds, reynolds_scale=None):

@@ -148,6 +148,10 @@ def build(case: Case) -> Model:
                         "represent; allowed: no inlet_length (a disk of inlet_diameter)")
     box_area = g.width * g.depth
     inlet_radius = 0.5 * g.inlet_diameter
+    if p.plume_dilution_reynolds and p.channel_radius_form != "flux":
+        raise CaseError(f"popbal.plume_dilution_reynolds = {p.plume_dilution_reynolds!r}: dilutes the flux form's plume "
+                        f"volume fraction, but popbal.channel_radius_form = {p.channel_radius_form or 'inlet'!r}; allowed: with "
+                        "channel_radius_form = 'flux', or no plume_dilution_reynolds")
     channel_radius, plume_velocity, reynolds, transport = channel_closure(case)
     channel_area = math.pi * channel_radius**2
     if channel_area >= box_area:
@@ -439,6 +443,10 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
     excess = case.matte.density - case.slag.density
 
     def radius_of(velocity):
+        if p.channel_radius_form == "flux" and p.plume_dilution_reynolds:  # no wider than the inlet that feeds it
+            return min(closures.diluted_channel_radius(volume_flux, velocity, p.channel_radius_factor,
+                                                       p.plume_dilution_reynolds, case.slag.density,
+                                                       case.slag_viscosity), 0.5 * g.inlet_diameter)
         if p.channel_radius_form == "flux":
             return closures.flux_channel_radius(volume_flux, velocity, p.channel_radius_factor)
         return p.channel_radius_factor * 0.5 * g.inlet_diameter

@@ -318,6 +318,10 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                             "sqrt(Q_ch / (pi u_s)): continuity at a fixed plume volume fraction "
                                             "1 / factor^2, u_s the steady plume velocity); absent: 'inlet'.",
                                      choices=("inlet", "flux"), optional=True),
+        "plume_dilution_reynolds": Field(F, "-", "Re_d, with channel_radius_form = 'flux': the plume's volume "
+                                                 "fraction is diluted by its Reynolds number, 1 / (factor^2 (1 + Re / "
+                                                 "Re_d)), Re = rho_s u_s R_c / mu (popbal.closures); absent: the fixed "
+                                                 "1 / factor^2.", 0.0, exclusive_minimum=True, optional=True),
         "plume_reynolds_scale": Field(F, "-", "Re_c: the droplets ride the plume at u_s / (1 + Re / Re_c), Re = "
                                               "rho_s u_s R_c / mu the plume Reynolds number, while the channel_velocity "
                                               "output stays the slag's u_s (popbal.closures); absent: no such "

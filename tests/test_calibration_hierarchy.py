@@ -358,14 +358,68 @@ def test_a_run_is_scored_under_the_fitted_closures_alone_as_the_written_layer_is
 
 
 def _roof_reference(tmp_path, name="cubic"):
-    """A copy of a stored reference's files that roof_from_zones reads."""
+    """A copy of a stored reference's files that roof_from_zones and dilution_from_zones read."""
     import shutil
 
     folder = tmp_path / name
     folder.mkdir()
-    for f in ("timeseries.csv", "zones.csv", "case.toml", "reference.json"):
+    for f in ("timeseries.csv", "zones.csv", "zone_profile.csv", "channel_profile.csv", "case.toml", "reference.json"):
         shutil.copy(f"data/reference/{name}/{f}", folder / f)
     return folder
+
+
+def test_dilution_fit_recovers_the_law_and_its_scatter():
+    """phi = k_R^-2 / (1 + Re / Re_d): exact data give k_R and Re_d back to round-off; 10 % log-normal scatter on
+    twelve runs gives them within three of the fit's own standard errors, which shrink as 1 / sqrt(n)."""
+    from analysis.calibration.hierarchy import fit_dilution
+
+    reynolds = np.geomspace(0.3, 20.0, 12)
+    phi = 1.0 / (4.9**2 * (1.0 + reynolds / 2.4))
+    exact = fit_dilution(phi, reynolds)
+    assert exact["value"] == pytest.approx(4.9, rel=1e-8) and exact["reynolds"] == pytest.approx(2.4, rel=1e-8)
+    rng = np.random.default_rng(3)
+    noisy = fit_dilution(phi * np.exp(0.1 * rng.standard_normal(12)), reynolds)
+    se = noisy["standard_errors"]
+    assert abs(noisy["value"] - 4.9) < 3.0 * se["channel_radius_factor"]
+    assert abs(noisy["reynolds"] - 2.4) < 3.0 * se["plume_dilution_reynolds"]
+    assert 0.05 < noisy["rms"] < 0.15 and -1.0 < noisy["correlation"] < 0.0  # a larger phi0 asks a smaller Re_d
+    more = fit_dilution(np.tile(phi, 4) * np.exp(0.1 * rng.standard_normal(48)), np.tile(reynolds, 4))
+    assert more["standard_errors"]["plume_dilution_reynolds"] < 0.7 * se["plume_dilution_reynolds"]
+
+
+def test_dilution_from_zones_reads_the_core_fraction_and_axis_velocity_of_each_run(tmp_path):
+    """Per run, phi_p is radius_factor_from_zones' core volume fraction, and Re = rho_s u R / mu with R = sqrt(Q /
+    (pi phi_p u)) from the axis velocity of channel_profile.csv over the same band and window; a run whose R
+    exceeds its inlet radius is left out with the reason."""
+    from analysis.calibration.hierarchy import (CORE_BAND, dilution_from_zones, radius_factor_from_zones)
+    from analysis.steady import window_of as steady_window_of
+    from settler.cases import load_case
+
+    import shutil
+
+    folder = _roof_reference(tmp_path)
+    copies = ["cubic", "cubic_2", "cubic_3"]  # three runs: the least a fit of two parameters takes
+    for name in copies[1:]:
+        shutil.copytree(folder, tmp_path / name)
+    got = dilution_from_zones(copies, tmp_path)
+    case = load_case(folder / "case.toml")
+    series = pd.read_csv(folder / "timeseries.csv", comment="#")
+    (start, _), _ = steady_window_of(series)
+    profile = pd.read_csv(folder / "channel_profile.csv", comment="#")
+    height = profile.z.max() + profile.z.min()
+    rows = profile[(profile.time > start) & (profile.z >= CORE_BAND[0] * height) & (profile.z <= CORE_BAND[1] * height)]
+    u = rows.channel_velocity.mean()
+    phi = radius_factor_from_zones(["cubic"], tmp_path)["core_fraction"]
+    radius = math.sqrt(case.feed.mass_rate / case.matte.density / (math.pi * phi * u))
+    assert got["per_run"]["cubic"] == pytest.approx((phi, case.slag.density * u * radius / case.slag_viscosity),
+                                                    rel=1e-9)
+    narrow = load_case(folder / "case.toml")  # the same run fed through an inlet narrower than its plume
+    text = (folder / "case.toml").read_text().replace(f"inlet_diameter = {narrow.geometry.inlet_diameter!r}",
+                                                      f"inlet_diameter = {1.5 * radius!r}")
+    (folder / "case.toml").write_text(text)
+    with pytest.raises(ValueError, match=r"at least 3 runs .*got cubic_2, cubic_3 \(left out: \{'cubic': 'R .* mm over "
+                                         r"the inlet radius"):
+        dilution_from_zones(copies, tmp_path)
 
 
 def test_roof_coefficient_from_zones_counts_the_slag_that_flows_through_the_roof(tmp_path):

@@ -34,6 +34,33 @@ def test_flux_radius_holds_the_feed_at_the_plume_fraction():
     assert closures.flux_channel_radius(0.0, 0.0, k) == 0.0
 
 
+def test_diluted_radius_holds_the_feed_at_the_reynolds_diluted_fraction():
+    """pi R^2 u phi_p = Q with phi_p = 1 / (k_R^2 (1 + Re / Re_d)), Re = rho_s u R / mu at the returned R, to
+    round-off, over a 57-fold feed; the flux form's radius as Re_d grows without bound; and, with a case, the
+    radius no wider than the inlet, and the law refused without the flux form."""
+    c, k = 0.37, 5.0
+    for q, re_d in ((Q, 2.3), (Q / 57.0, 2.3), (Q, 0.05)):
+        u = closures.steady_channel_velocity(q, DRHO, MU, c)
+        r = closures.diluted_channel_radius(q, u, k, re_d, RHO_S, MU)
+        reynolds = closures.plume_reynolds(u, r, RHO_S, MU)
+        assert closures.steady_channel_fraction(q, r, u) == pytest.approx(1.0 / (k**2 * (1.0 + reynolds / re_d)),
+                                                                         rel=1e-12)
+        assert r > closures.flux_channel_radius(q, u, k)
+    u = closures.steady_channel_velocity(Q, DRHO, MU, c)
+    assert closures.diluted_channel_radius(Q, u, k, 1e12, RHO_S, MU) == pytest.approx(
+        closures.flux_channel_radius(Q, u, k), rel=1e-9)
+    assert closures.diluted_channel_radius(0.0, u, k, 2.3, RHO_S, MU) == 0.0
+    keys = {"case.calibration": "none", "popbal.channel_radius_form": "flux", "popbal.channel_coefficient": 0.37,
+            "popbal.channel_radius_factor": 5.0}
+    radius = channel_closure(load_case("simple", {**keys, "popbal.plume_dilution_reynolds": 2.3}))[0]
+    u = closures.steady_channel_velocity(Q, DRHO, MU, c)
+    assert radius == pytest.approx(closures.diluted_channel_radius(Q, u, k, 2.3, RHO_S, MU), rel=1e-3)
+    assert channel_closure(load_case("simple", {**keys, "popbal.plume_dilution_reynolds": 1e-4}))[0] == 0.075
+    from settler.errors import CaseError
+    with pytest.raises(CaseError, match="plume_dilution_reynolds = 2.3.*channel_radius_form = 'inlet'"):
+        popbal.setup("simple", {"case.calibration": "none", "popbal.plume_dilution_reynolds": 2.3})
+
+
 def test_transport_factor():
     """1 / (1 + Re / Re_c): 1/2 at Re = Re_c, 1 without a scale."""
     assert closures.transport_factor(2.0, 2.0) == 0.5

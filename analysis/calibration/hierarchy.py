@@ -57,7 +57,13 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers": {"levels": LAYER_LEVELS, "layers": True},
             "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": BUSY},
             "layers_busy": {"levels": LAYER_LEVELS, "layers": True, "switches": BUSY},
-            "zones": {"levels": LAYER_LEVELS, "layers": True, "switches": CONFINED, "roof_kernel": True}}
+            "zones": {"levels": LAYER_LEVELS, "layers": True, "switches": CONFINED, "roof_kernel": True},
+            "zones_dilution": {"levels": LAYER_LEVELS, "layers": True, "switches": CONFINED, "roof_kernel": True,
+                               "dilution": True}}
+#: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
+#: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
+#: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
+#: transport runs alone.
 #: What each switch of a closure set stands for (the layer's comment on it).
 SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time merging, not fitted",
                 "popbal.confinement": "the confined plume's coefficient and return flow (popbal.closures), not fitted"}
@@ -96,9 +102,7 @@ class Hierarchy:
         c = self.collision
         lines = [f"level collision: E = {c['efficiency']:.3f} +- {c['standard_error']:.3f} from the kernel run "
                  f"({c['merges']} merges against {c['expected_collisions']:.0f} gravitational collisions)",
-                 f"flux form radius factor from the zone diagnostics: k_R = {self.radius_factor['value']:.2f} "
-                 f"(core volume fraction {self.radius_factor['core_fraction']:.4f} in "
-                 f"{', '.join(self.radius_factor['runs'])})"]
+                 _radius_line(self.radius_factor)]
         if self.roof:
             lines.append(f"roof layer from the zone diagnostics: c_L = {self.roof['coefficient']:.4g} (per run "
                          + ", ".join(f"{r} {v:.3g}" for r, v in self.roof["per_run"].items())
@@ -145,6 +149,20 @@ class Hierarchy:
         return "\n".join(lines)
 
 
+def _radius_line(k_r: dict) -> str:
+    """The summary's line on the flux form's radius factor (and the dilution law, where it has one)."""
+    if "reynolds" not in k_r:
+        return (f"flux form radius factor from the zone diagnostics: k_R = {k_r['value']:.2f} (core volume fraction "
+                f"{k_r['core_fraction']:.4f} in {', '.join(k_r['runs'])})")
+    se = k_r["standard_errors"]
+    return (f"plume dilution law from the zone diagnostics: k_R = {k_r['value']:.3g} +- "
+            f"{se['channel_radius_factor']:.2g}, Re_d = {k_r['reynolds']:.3g} +- {se['plume_dilution_reynolds']:.2g} "
+            f"(correlation {k_r['correlation']:.2f}, rms {k_r['rms']:.2f} in log phi_p) over "
+            + ", ".join(f"{r} ({phi:.4f} at Re {re:.3g})" for r, (phi, re) in k_r["per_run"].items())
+            + (f"; left out {', '.join(f'{r}: {why}' for r, why in k_r['excluded'].items())}"
+               if k_r["excluded"] else ""))
+
+
 def _fmt(value) -> str:
     return "open" if value is None else f"{value:.4g}"
 
@@ -157,24 +175,80 @@ def _error_rows(errors: dict, limit: float) -> list[str]:
     return rows + [f"  (* beyond {limit:.0%})"]
 
 
-def radius_factor_from_zones(runs, reference_dir: str | Path) -> dict:
-    """k_R = phi_p^(-1/2) [-] from the plume core's volume fraction phi_p (``zone_profile.csv``: the mean of
-    core_volume_fraction over the :data:`CORE_BAND` of the height and the runs' steady windows)."""
+def _core_band(folder: Path, table: str) -> pd.DataFrame:
+    """The rows of a stored run's ``table`` (zone_profile.csv or channel_profile.csv) in the :data:`CORE_BAND` of the
+    height over the run's steady window."""
     from analysis.runs import load_run
 
     from .targets import window_of
 
-    fractions = []
-    for run in runs:
-        folder = Path(reference_dir) / run
-        profile = pd.read_csv(folder / "zone_profile.csv", comment="#")
-        (start, end), _ = window_of(load_run(folder).timeseries)
-        height = float(profile["z"].max() + profile["z"].min())  # cell centres: first + last = the height
-        band = profile[(profile["time"] > start) & (profile["z"] >= CORE_BAND[0] * height)
-                       & (profile["z"] <= CORE_BAND[1] * height)]
-        fractions.append(float(band["core_volume_fraction"].mean()))
+    profile = pd.read_csv(folder / table, comment="#")
+    (start, end), _ = window_of(load_run(folder).timeseries)
+    height = float(profile["z"].max() + profile["z"].min())  # cell centres: first + last = the height
+    return profile[(profile["time"] > start) & (profile["z"] >= CORE_BAND[0] * height)
+                   & (profile["z"] <= CORE_BAND[1] * height)]
+
+
+def radius_factor_from_zones(runs, reference_dir: str | Path) -> dict:
+    """k_R = phi_p^(-1/2) [-] from the plume core's volume fraction phi_p (``zone_profile.csv``: the mean of
+    core_volume_fraction over the :data:`CORE_BAND` of the height and the runs' steady windows)."""
+    fractions = [float(_core_band(Path(reference_dir) / run, "zone_profile.csv")["core_volume_fraction"].mean())
+                 for run in runs]
     phi = float(np.mean(fractions))
     return {"value": phi ** -0.5, "core_fraction": phi, "runs": list(runs)}
+
+
+def dilution_from_zones(runs, reference_dir: str | Path) -> dict:
+    """The plume's dilution law phi_p = k_R^-2 / (1 + Re / Re_d) (popbal.closures, ``plume_dilution_reynolds``)
+    from the zone diagnostics of ``runs``: per run the core volume fraction phi_p (as :func:`radius_factor_from_zones`)
+    and the slag's axis velocity u (``channel_profile.csv``, the same band and window), the radius R = sqrt(Q_ch /
+    (pi phi_p u)) that carries the feed at them and Re = rho_s u R / mu; k_R and Re_d by least squares in log phi_p,
+    with standard errors and their correlation from the residuals' scatter. A run whose R exceeds its inlet radius is
+    left out (``excluded``): its plume fills the feed's disk, which popbal caps, and measures the cap, not the law.
+    Returns {"value": k_R, "core_fraction": k_R^-2, "reynolds": Re_d, "standard_errors": {...}, "correlation",
+    "rms" (of the log residuals), "per_run": {run: (phi_p, Re)}, "excluded": {run: why}, "runs"}."""
+    from settler.cases import load_case
+
+    per_run, excluded = {}, {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        phi = float(_core_band(folder, "zone_profile.csv")["core_volume_fraction"].mean())
+        u = float(_core_band(folder, "channel_profile.csv")["channel_velocity"].mean())
+        case = load_case(folder / "case.toml")
+        flux = case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
+        radius = math.sqrt(flux / (math.pi * phi * u))
+        if radius > 0.5 * case.geometry.inlet_diameter:
+            excluded[run] = f"R {radius * 1e3:.3g} mm over the inlet radius {case.geometry.inlet_diameter * 500:.3g} mm"
+            continue
+        per_run[run] = (phi, case.slag.density * u * radius / case.slag_viscosity)
+    if len(per_run) < 3:
+        raise ValueError(f"the dilution law needs the zones of at least 3 runs whose plume is narrower than the inlet; "
+                         f"got {', '.join(per_run) or 'none'} (left out: {excluded or 'none'})")
+    phi, reynolds = (np.array(v) for v in zip(*per_run.values()))
+    return {**fit_dilution(phi, reynolds), "per_run": {r: (float(a), float(b)) for r, (a, b) in per_run.items()},
+            "excluded": excluded, "runs": list(per_run)}
+
+
+def fit_dilution(phi, reynolds) -> dict:
+    """k_R and Re_d of phi = k_R^-2 / (1 + Re / Re_d) from volume fractions ``phi`` and Reynolds numbers
+    ``reynolds`` (arrays, n >= 3) by least squares in log phi; standard errors (``standard_errors``, by [popbal]
+    key) and their ``correlation`` from the residuals' scatter, ``rms`` of the log residuals."""
+    from scipy.optimize import least_squares
+
+    phi, reynolds = np.asarray(phi, dtype=float), np.asarray(reynolds, dtype=float)
+    fit = least_squares(lambda x: x[0] - np.log1p(reynolds / np.exp(x[1])) - np.log(phi),
+                        [math.log(float(phi.max())), 0.0], xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    dof = len(phi) - 2
+    covariance = np.linalg.pinv(fit.jac.T @ fit.jac) * (2.0 * fit.cost / dof if dof > 0 else math.nan)
+    se = np.sqrt(np.diag(covariance))
+    phi0, re_d = math.exp(fit.x[0]), math.exp(fit.x[1])
+    with np.errstate(invalid="ignore", divide="ignore"):  # runs of one Reynolds number: no correlation to give
+        correlation = float(covariance[0, 1] / (se[0] * se[1]))
+    return {"value": phi0 ** -0.5, "core_fraction": phi0, "reynolds": re_d,
+            # relative errors of phi0 and Re_d are the log parameters' standard errors; k_R's is half phi0's
+            "standard_errors": {"channel_radius_factor": 0.5 * se[0] * phi0 ** -0.5,
+                                "plume_dilution_reynolds": se[1] * re_d},
+            "correlation": correlation, "rms": float(np.sqrt(np.mean(fit.fun ** 2)))}
 
 
 def _roof_layer(folder: Path, start: float, end: float) -> tuple[float, float]:
@@ -319,9 +393,17 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     values = {"collision_efficiency": (collision["efficiency"], collision["standard_error"])}
 
     transport_runs, missing["transport"] = _stored(registry.levels.get("transport", ()), reference_dir)
-    k_r = radius_factor_from_zones(transport_runs, reference_dir)
+    if CLOSURES[closures].get("dilution"):  # the zones of every fitted run, never a hold-out's
+        zone_runs = transport_runs + [r for r in _stored(registry.levels.get("whole", ()), reference_dir)[0]
+                                      if r not in transport_runs]
+        refuse_holdouts(zone_runs, registry, "the dilution law")
+        k_r = dilution_from_zones(zone_runs, reference_dir)
+    else:
+        k_r = radius_factor_from_zones(transport_runs, reference_dir)
     fixed = {**FORM, **CLOSURES[closures].get("switches", {}), "popbal.channel_radius_factor": k_r["value"],
              "popbal.collision_efficiency": collision["efficiency"]}
+    if "reynolds" in k_r:
+        fixed["popbal.plume_dilution_reynolds"] = k_r["reynolds"]
     roof = None
     if CLOSURES[closures]["layers"]:
         roof = roof_from_zones(transport_runs, reference_dir)
