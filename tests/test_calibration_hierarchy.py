@@ -457,6 +457,28 @@ def test_roof_coefficient_from_zones_counts_the_slag_that_flows_through_the_roof
         roof_from_zones(["cubic"], tmp_path)
 
 
+def test_cell_efficiency_is_the_kernel_runs_merges_over_its_cell_by_cell_collisions(tmp_path):
+    """The 'zones_dilution' collision level: all bands' merges over all bands' cell-by-cell collisions, with the
+    Poisson count of the merges and the rate's scatter in quadrature (E sqrt(1/M + s^2)), from a stand-in table;
+    every closure set that asks for it takes it, the others the kernel run's slices."""
+    from analysis.band_efficiency import COLLISIONS_FILE, COLLISIONS_UNITS
+    from analysis.calibration.hierarchy import CLOSURES, cell_efficiency
+    from settler.output import units_line
+
+    rows = pd.DataFrame({column: [0.0, 0.0] for column in COLLISIONS_UNITS})
+    rows["z"] = [0.025, 0.075]
+    rows["merges_under_inlet"], rows["merges_elsewhere"], rows["collisions"] = [60.0, 30.0], [6.0, 4.0], [110.0, 15.0]
+    rows["gravitational_under_inlet"], rows["gravitational_elsewhere"] = [100.0, 10.0], [10.0, 5.0]
+    rows["shear_under_inlet"], rows["shear_elsewhere"] = [8.0, 3.0], [1.0, 2.0]
+    header = units_line(COLLISIONS_UNITS) + "# window: 10.0 20.0 s; cell: 0.005 m; rate_scatter: 0.05; snapshots: 10.0 20.0\n"
+    (tmp_path / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
+    got = cell_efficiency(tmp_path)
+    assert got["efficiency"] == pytest.approx(100.0 / 125.0, rel=1e-12)
+    assert got["standard_error"] == pytest.approx(0.8 * math.sqrt(1.0 / 100.0 + 0.05**2), rel=1e-12)
+    assert got["merges"] == 100 and got["expected_collisions"] == 125.0 and got["form"] == "cell"
+    assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution"]
+
+
 def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
     """The 'zones' closures' roof kernel, by hand from two stand-in runs (the demo's case, no slag feed): each a top
     band under the inlet (merges M, well-mixed collisions C_g + C_s, shear rate G, matte V_b) and a roof in zones.csv

@@ -59,11 +59,13 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers_busy": {"levels": LAYER_LEVELS, "layers": True, "switches": BUSY},
             "zones": {"levels": LAYER_LEVELS, "layers": True, "switches": CONFINED, "roof_kernel": True},
             "zones_dilution": {"levels": LAYER_LEVELS, "layers": True, "switches": CONFINED, "roof_kernel": True,
-                               "dilution": True}}
+                               "dilution": True, "cell_efficiency": True}}
 #: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
 #: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
 #: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
-#: transport runs alone.
+#: transport runs alone; and the collision level's efficiency taken cell by cell (:func:`cell_efficiency`), the
+#: coalescence rule's own, where the other sets take it over horizontal slices of the whole box, which folds in
+#: how much denser the droplets are under the inlet than elsewhere: a contrast popbal's zones hold themselves.
 #: What each switch of a closure set stands for (the layer's comment on it).
 SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time merging, not fitted",
                 "popbal.confinement": "the confined plume's coefficient and return flow (popbal.closures), not fitted"}
@@ -101,7 +103,8 @@ class Hierarchy:
     def summary(self) -> str:
         c = self.collision
         lines = [f"level collision: E = {c['efficiency']:.3f} +- {c['standard_error']:.3f} from the kernel run "
-                 f"({c['merges']} merges against {c['expected_collisions']:.0f} gravitational collisions)",
+                 f"({c['merges']} merges against {c['expected_collisions']:.0f} gravitational collisions"
+                 + (", cell by cell)" if c.get("form") == "cell" else ")"),
                  _radius_line(self.radius_factor)]
         if self.roof:
             lines.append(f"roof layer from the zone diagnostics: c_L = {self.roof['coefficient']:.4g} (per run "
@@ -147,6 +150,20 @@ class Hierarchy:
                          f"window means ({c['share']:.0%})"
                          + (f"; outside: {', '.join(f'{r} {k}' for r, k in c['outside'])}" if c["outside"] else ""))
         return "\n".join(lines)
+
+
+def cell_efficiency(run_folder) -> dict:
+    """The collision level's efficiency cell by cell: a stored kernel run's merges over the gravitational collisions
+    its droplets make in each grid cell (its ``collisions_by_height.csv``, :func:`analysis.band_efficiency.
+    efficiencies`), in the keys of :func:`analysis.kernel_run.kernel_run_efficiency` (no time quadrature: the
+    rate's scatter over the snapshots is in the standard error), with ``form`` 'cell'."""
+    from analysis.band_efficiency import COLLISIONS_FILE, efficiencies, read_collisions
+
+    table, meta = read_collisions(Path(run_folder) / COLLISIONS_FILE)
+    result = efficiencies(table, meta)
+    merges = float(table[["merges_under_inlet", "merges_elsewhere"]].to_numpy().sum())
+    return {"efficiency": result["efficiency"], "standard_error": result["standard_error"], "quadrature_error": 0.0,
+            "merges": int(round(merges)), "expected_collisions": float(table["collisions"].sum()), "form": "cell"}
 
 
 def _radius_line(k_r: dict) -> str:
@@ -389,7 +406,8 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
         raise FileNotFoundError(f"{reference_dir}: no kernel run stored; the collision level needs "
                                 f"{', '.join(registry.levels.get('collision', ('kernel',)))}")
     refuse_holdouts(collision_runs, registry, "level collision")
-    collision = kernel_run_efficiency(Path(reference_dir) / collision_runs[0])
+    collision = (cell_efficiency if CLOSURES[closures].get("cell_efficiency") else kernel_run_efficiency)(
+        Path(reference_dir) / collision_runs[0])
     values = {"collision_efficiency": (collision["efficiency"], collision["standard_error"])}
 
     transport_runs, missing["transport"] = _stored(registry.levels.get("transport", ()), reference_dir)

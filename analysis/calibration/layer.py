@@ -60,7 +60,8 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
              + ("" if result.gate_passed else ": the values below are not to be used for predictions (no preset "
                                                 "applies this layer)") + ".", "", "[popbal]",
              f"collision_efficiency = {c['efficiency']!r}  # - [derived] level collision: the kernel run's merges "
-             f"over its gravitational collisions, standard error {c['standard_error']:.3g}",
+             f"over its gravitational collisions{' cell by cell' if c.get('form') == 'cell' else ''}, standard error "
+             f"{c['standard_error']:.3g}",
              f"channel_radius_factor = {k_r['value']!r}  # - [derived] phi_p^(-1/2) of the plume core's volume "
              f"fraction {k_r['core_fraction']:.4g} in the zone diagnostics of {', '.join(k_r['runs'])}"
              + (" (the dilution law's Re -> 0 limit)" if "reynolds" in k_r else "")]
