@@ -53,7 +53,7 @@ REDUCED_ENGINE = "popbal"
 NETCDF_COMPLEVEL = 4
 #: Dimension of each letter in the shape note that opens a distribution array's meaning ("(T, Z, J, K) ..."),
 #: as popbal.DISTRIBUTION_ARRAYS writes them.
-SHAPE_LETTERS = {"T": "time", "Z": "zone", "J": "z", "K": "section"}
+SHAPE_LETTERS = {"T": "time", "Z": "zone", "J": "z", "K": "section", "X": "path"}
 
 _UNITS_LINE = re.compile(r"(\w+) \[([^\]]*)\]")
 _SHAPE_NOTE = re.compile(r"^\(([A-Z](?:,\s*[A-Z])*),?\)\s*")
@@ -332,6 +332,11 @@ def distribution_dataset(arrays: dict, descriptions: dict[str, tuple[str, str]],
     if "zone" in sizes:
         names = list(zones) if zones is not None and len(zones) == sizes["zone"] else list(range(sizes["zone"]))
         coords["zone"] = ("zone", np.asarray([str(z) for z in names]), {"long_name": "zone"})
+    if "path" in sizes:  # the return flow's paths between zones (popbal.driver.EXCHANGES)
+        from popbal.driver import EXCHANGES
+
+        names = list(EXCHANGES) if len(EXCHANGES) == sizes["path"] else list(range(sizes["path"]))
+        coords["path"] = ("path", np.asarray([str(p) for p in names]), {"long_name": "path between zones"})
     return xr.Dataset(data, coords=coords, attrs=dict(attrs or {}))
 
 

@@ -11,6 +11,7 @@ import pytest
 import xarray as xr
 
 import popbal
+from popbal.driver import EXCHANGES
 from analysis import Run, load_run
 from analysis.figures import NoData
 from analysis.runs import array_dims, read_netcdf, write_netcdf
@@ -46,9 +47,11 @@ def test_distribution_dataset_labels_and_units(reduced):
     folder, result = reduced
     ds = load_run(folder).distribution()
     model = result.model
-    assert dict(ds.sizes) == {"time": 9, "zone": len(popbal.ZONES), "z": model.cells, "section": model.grid.size}
+    assert dict(ds.sizes) == {"time": 9, "zone": len(popbal.ZONES), "z": model.cells, "section": model.grid.size,
+                              "path": len(EXCHANGES)}
     assert ds.number_density.dims == ("time", "zone", "z", "section") and ds.fed_mass.dims == ("time", "section")
-    assert list(ds.zone.values) == list(popbal.ZONES)
+    assert list(ds.zone.values) == list(popbal.ZONES) and list(ds.path.values) == list(EXCHANGES)
+    assert ds.exchanges.dims == ("time", "path")
     for name, (unit, _) in popbal.DISTRIBUTION_ARRAYS.items():
         assert ds[name].attrs["units"] == unit
         np.testing.assert_array_equal(ds[name].values, result.arrays[name])
