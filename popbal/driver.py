@@ -75,6 +75,7 @@ EXCHANGES: dict[str, str] = {
     "outer_to_channel": "entrained from the outer zone into the channel (entrainment_length)",
     "outer_to_top": "risen out of the outer zone's top cell into the roof layer (or the channel's top cell)",
 }
+_PATH = {name: index for index, name in enumerate(EXCHANGES)}  # a path's index in the exchanges array
 
 
 #: Seconds of wall time after which a run started with progress=None begins to report.
@@ -400,13 +401,13 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
                 share = settling_share(work.velocities[OUTER, 0] + upflow, model.return_velocity)
                 work.turned[:] = work.bottom_out * (1.0 - share)[None, :] * area
                 work.bottom_out *= share[None, :]
-                books.exchanges[1] += work.turned[NUMBER].sum()
+                books.exchanges[_PATH["channel_to_outer"]] += work.turned[NUMBER].sum()
             elif p["bottom_turning"] > 0.0 and zone == CHANNEL:  # a share of the slow ones turns, the rest goes down
                 turning = p["bottom_turning"] * (1.0 - settling_share(work.velocities[OUTER, 0] + upflow,
                                                                       model.return_velocity))
                 work.turned[:] = work.bottom_out * turning[None, :] * area
                 work.bottom_out *= (1.0 - turning)[None, :]
-                books.exchanges[1] += work.turned[NUMBER].sum()
+                books.exchanges[_PATH["channel_to_outer"]] += work.turned[NUMBER].sum()
             _reach_floor(model, work, books, area)
         books.lost += work.sink_out * area
         if p["coalescence"]:
@@ -445,8 +446,8 @@ def _return_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
                       model.exchange_rate if entraining else work.no_loss, work.lateral_out)
     if entraining:  # the plume takes the entrained droplets into the channel's cell at their height
         content[CHANNEL] += work.lateral_out * (area / model.zone_area[CHANNEL])
-        books.exchanges[2] += work.lateral_out[:, NUMBER].sum() * area * dz
-    books.exchanges[3] += work.top_out[NUMBER].sum() * area
+        books.exchanges[_PATH["outer_to_channel"]] += work.lateral_out[:, NUMBER].sum() * area * dz
+    books.exchanges[_PATH["outer_to_top"]] += work.top_out[NUMBER].sum() * area
     _reach_floor(model, work, books, area)
     rise_into = ROOF if model.roof else CHANNEL  # the risers rejoin the roof layer where there is one
     content[rise_into, -1] += work.top_out * area / (model.zone_area[rise_into] * dz)
@@ -493,7 +494,7 @@ def _bottom_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
         lifted = out * lift_share(own, p["bottom_lift"], p["bottom_lift_velocity"])[None, :]
         content[OUTER, 0] += lifted * volume / (model.zone_area[OUTER] * model.cell_height)
         out = out - lifted
-        books.exchanges[0] += lifted[NUMBER].sum() * volume
+        books.exchanges[_PATH["floor_to_outer"]] += lifted[NUMBER].sum() * volume
     books.settled += out * volume
 
 

@@ -149,9 +149,10 @@ def build(case: Case) -> Model:
     box_area = g.width * g.depth
     inlet_radius = 0.5 * g.inlet_diameter
     if p.plume_dilution_reynolds and p.channel_radius_form != "flux":
-        raise CaseError(f"popbal.plume_dilution_reynolds = {p.plume_dilution_reynolds!r}: dilutes the flux form's plume "
-                        f"volume fraction, but popbal.channel_radius_form = {p.channel_radius_form or 'inlet'!r}; allowed: with "
-                        "channel_radius_form = 'flux', or no plume_dilution_reynolds")
+        raise CaseError(f"popbal.plume_dilution_reynolds = {p.plume_dilution_reynolds!r}: dilutes the flux form's "
+                        f"plume volume fraction, but popbal.channel_radius_form = "
+                        f"{p.channel_radius_form or 'inlet'!r}; allowed: with channel_radius_form = 'flux', or no "
+                        "plume_dilution_reynolds")
     channel_radius, plume_velocity, reynolds, transport = channel_closure(case)
     channel_area = math.pi * channel_radius**2
     if channel_area >= box_area:

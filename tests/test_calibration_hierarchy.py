@@ -407,7 +407,8 @@ def test_dilution_from_zones_reads_the_core_fraction_and_axis_velocity_of_each_r
     (start, _), _ = steady_window_of(series)
     profile = pd.read_csv(folder / "channel_profile.csv", comment="#")
     height = profile.z.max() + profile.z.min()
-    rows = profile[(profile.time > start) & (profile.z >= CORE_BAND[0] * height) & (profile.z <= CORE_BAND[1] * height)]
+    rows = profile[(profile.time > start) & (profile.z >= CORE_BAND[0] * height)
+                   & (profile.z <= CORE_BAND[1] * height)]
     u = rows.channel_velocity.mean()
     phi = radius_factor_from_zones(["cubic"], tmp_path)["core_fraction"]
     radius = math.sqrt(case.feed.mass_rate / case.matte.density / (math.pi * phi * u))
@@ -470,7 +471,8 @@ def test_cell_efficiency_is_the_kernel_runs_merges_over_its_cell_by_cell_collisi
     rows["merges_under_inlet"], rows["merges_elsewhere"], rows["collisions"] = [60.0, 30.0], [6.0, 4.0], [110.0, 15.0]
     rows["gravitational_under_inlet"], rows["gravitational_elsewhere"] = [100.0, 10.0], [10.0, 5.0]
     rows["shear_under_inlet"], rows["shear_elsewhere"] = [8.0, 3.0], [1.0, 2.0]
-    header = units_line(COLLISIONS_UNITS) + "# window: 10.0 20.0 s; cell: 0.005 m; rate_scatter: 0.05; snapshots: 10.0 20.0\n"
+    header = (units_line(COLLISIONS_UNITS)
+              + "# window: 10.0 20.0 s; cell: 0.005 m; rate_scatter: 0.05; snapshots: 10.0 20.0\n")
     (tmp_path / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
     got = cell_efficiency(tmp_path)
     assert got["efficiency"] == pytest.approx(100.0 / 125.0, rel=1e-12)

@@ -224,6 +224,7 @@ def dilution_from_zones(runs, reference_dir: str | Path) -> dict:
     left out (``excluded``): its plume fills the feed's disk, which popbal caps, and measures the cap, not the law.
     Returns {"value": k_R, "core_fraction": k_R^-2, "reynolds": Re_d, "standard_errors": {...}, "correlation",
     "rms" (of the log residuals), "per_run": {run: (phi_p, Re)}, "excluded": {run: why}, "runs"}."""
+    from popbal.closures import plume_reynolds
     from settler.cases import load_case
 
     per_run, excluded = {}, {}
@@ -235,9 +236,10 @@ def dilution_from_zones(runs, reference_dir: str | Path) -> dict:
         flux = case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
         radius = math.sqrt(flux / (math.pi * phi * u))
         if radius > 0.5 * case.geometry.inlet_diameter:
-            excluded[run] = f"R {radius * 1e3:.3g} mm over the inlet radius {case.geometry.inlet_diameter * 500:.3g} mm"
+            excluded[run] = (f"R {radius * 1e3:.3g} mm over the inlet radius "
+                             f"{case.geometry.inlet_diameter * 500:.3g} mm")
             continue
-        per_run[run] = (phi, case.slag.density * u * radius / case.slag_viscosity)
+        per_run[run] = (phi, plume_reynolds(u, radius, case.slag.density, case.slag_viscosity))
     if len(per_run) < 3:
         raise ValueError(f"the dilution law needs the zones of at least 3 runs whose plume is narrower than the inlet; "
                          f"got {', '.join(per_run) or 'none'} (left out: {excluded or 'none'})")
