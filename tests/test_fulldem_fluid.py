@@ -419,6 +419,36 @@ def test_stable_dt_and_diagnostics():
     assert diagnostics.viscous_number == pytest.approx(NU * 1e-3 / small.spacing**2)
 
 
+@pytest.mark.parametrize("periodic", [(False, False, False), (True, True, True)])
+def test_the_viscous_limit_is_where_the_explicit_step_turns_unstable(periodic):
+    """The explicit viscous limit h^2 / (6 nu) that stable_dt quotes and fulldem.driver.check_case enforces is sharp:
+    random (projected) velocities in a 2.5 mm grid of slag at twice the demo's viscosity (the fine
+    demo_visc_double run, stopped at 0.58 s with the 4 ms step, 1.1 times this limit) lose energy over 200 steps
+    of 0.95 times the limit and gain more than a thousandfold at 1.05 times it. Heun's (SSP-RK2) stability interval
+    on the real axis is [-2, 0]; the 7-point Laplacian's largest decay rate approaches 12 nu / h^2."""
+    density, viscosity = 3150.0, 0.9
+    grid = Grid((10, 10, 10), 0.0025, periodic=periodic)
+    boundary = fluid_walls.make_boundary(grid)
+    limit = grid.spacing**2 / (6.0 * viscosity / density)
+    assert fluid_solver.stable_dt(grid, fluid_solver.rest_state(grid), density, viscosity) == pytest.approx(limit)
+
+    def energy_ratio(factor):
+        rng = np.random.default_rng(3)
+        state = fluid_solver.FluidState(*(1e-3 * rng.standard_normal(grid.face_shape(a)) for a in range(3)),
+                                        grid.zeros_cells())
+        state, _ = fluid_solver.step(grid, state, boundary, density, viscosity, 1e-9)  # projected: divergence-free
+        start = sum(np.sum(a**2) for a in state[:3])
+        for _ in range(200):
+            state, _ = fluid_solver.step(grid, state, boundary, density, viscosity, factor * limit)
+            energy = sum(np.sum(a**2) for a in state[:3])
+            if not energy < 1e3 * start:
+                break
+        return energy / start
+
+    assert energy_ratio(0.95) < 1e-2
+    assert not energy_ratio(1.05) < 1e3
+
+
 @pytest.mark.parametrize("side", ["x-", "x+", "y-", "y+"])
 def test_outlet_closes_the_mixture_volume_balance(side):
     """Outlet on any side wall, with droplets entering through the top (particle flux on the inlet faces) and a

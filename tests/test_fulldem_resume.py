@@ -275,6 +275,7 @@ def test_feed_backlog_is_reported(tmp_path):
     ("fulldem.cell_size=0.00025", "needs about"),  # a 400^3 grid
     ("fulldem.sigma_cells=100", "more than the box's smallest edge"),  # a 2.5 m kernel in a 0.1 m box
     ("fulldem.dem_step=0.004", "steps per contact"),  # the DEM step equal to the fluid step
+    ("fulldem.fluid_step=0.03", "explicit viscous limit"),  # above h^2 / (6 nu) = 0.0292 s of 5 mm cells
 ])
 def test_grid_refusals_name_the_key(override, expected, capsys, tmp_path):
     with pytest.raises(CaseError, match="fulldem"):
