@@ -218,13 +218,14 @@ def _write_snapshots(path: Path, times, chosen, droplets, slag, keep_bits=None) 
 def store_reference(run, case_name, dest_root="data/reference", snapshots=4, command=None, commit=None) -> Path:
     """Store the run folder ``run`` small as the reference ``dest_root/case_name/`` and return that folder.
 
-    Copies ``timeseries.csv`` and ``case.toml`` (required), ``merges_by_size.csv`` and ``channel_profile.csv`` (if
-    present) unchanged; writes ``snapshots.npz`` with ``snapshots`` droplet snapshots (0: none, no file) chosen by
-    :func:`choose_snapshots` (float32; the slag velocity on the central x-z plane with each) and ``reference.json``
-    (see the module docstring). ``command`` defaults to metadata.json's "command", ``commit`` to metadata.json's
-    "commit", else ``git rev-parse HEAD`` of this repository (None if that fails). The folder is written as a temporary sibling and renamed over the
-    previous one, whose content is replaced. Over :data:`SIZE_LIMIT` bytes, fewer snapshots are kept (down to 1),
-    noted in ``reference.json``'s ``notes``.
+    Copies ``timeseries.csv`` and ``case.toml`` (required) and the optional tables (if present), the tables at
+    float32's precision (:func:`compact_table`); writes ``snapshots.npz`` with ``snapshots`` droplet snapshots (0:
+    none, no file) chosen by :func:`choose_snapshots` (float32; the slag velocity on the central x-z plane with each)
+    and ``reference.json`` (see the module docstring). ``command`` defaults to metadata.json's "command", ``commit``
+    to metadata.json's "commit", else ``git rev-parse HEAD`` of this repository (None if that fails). The folder is
+    written as a temporary sibling and renamed over the previous one, whose content is replaced. Over
+    :data:`SIZE_LIMIT` bytes, fewer snapshots are kept (down to 1), and then the one bit-rounded (:data:`KEEP_BITS`
+    down to :data:`MIN_KEEP_BITS`), noted in ``reference.json``'s ``notes``.
 
     Raises :class:`StoreError` (a ValueError) naming the file: no run folder, no timeseries.csv or case.toml, an
     unreadable snapshot or JSON file, a bad case name or a destination that is the run folder itself.

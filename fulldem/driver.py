@@ -154,8 +154,8 @@ def check_case(case) -> None:
     if fd.fluid_step > viscous_limit:
         raise CaseError(f"fulldem.fluid_step = {fd.fluid_step:g} s: above the explicit viscous limit h^2 / (6 nu) = "
                         f"{viscous_limit:.3g} s of cells of h = {fd.cell_size:g} m in slag of nu = {nu:.3g} m^2/s "
-                        f"(viscosity {case.slag_viscosity:.3g} Pa s at {case.slag.temperature:g} K); the slag's velocity "
-                        f"grows without bound; allowed: fluid_step <= {viscous_limit:.3g} s (the reference runs keep "
+                        f"(viscosity {case.slag_viscosity:.3g} Pa s at {case.slag.temperature:g} K); the slag's "
+                        f"velocity grows without bound; allowed: fluid_step <= {viscous_limit:.3g} s (the reference runs keep "
                         f"nu dt / h^2 <= 0.1, i.e. fluid_step <= {0.6 * viscous_limit:.3g} s, where packed droplets "
                         f"shrink the slag's share of a cell)")
     if fd.near_wall == "wall" and fd.kernel != "filtered":

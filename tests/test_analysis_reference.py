@@ -1,8 +1,9 @@
 """analysis.reference on a synthetic run folder written here without any engine (six snapshots of the demo case):
 three snapshots are stored evenly in time with the last; droplets and the slag plane come back to float32
 precision, the CSV files with whole numbers exact and other values to 7 significant digits (float32's precision);
-one snapshot too large keeps 15 mantissa bits or fewer (bit rounding, error within 2^-(bits+1)); reference.json says where the run came from and when it ended; an oversized
-reference keeps fewer snapshots and says so; a folder without its time series or case is refused; and the
+reference.json says where the run came from and when it ended; an oversized reference keeps fewer snapshots and
+says so, and one snapshot still too large keeps 15 mantissa bits or fewer (bit rounding, error within
+2^-(bits+1)); a folder without its time series or case is refused; and the
 command line stores a run (exit 0) or refuses a bad folder (exit 2)."""
 
 import json
@@ -285,7 +286,8 @@ def test_too_large_keeps_fewer_snapshots_and_says_so(tmp_path, monkeypatch):
     # within 2^-(bits + 1) of the full one's; the same slag plane
     bits = [int(note.split(" keep ")[1].split()[0]) for note in info["notes"] if "mantissa bits" in note]
     assert bits == [reference.MIN_KEEP_BITS]
-    full, rounded = reference.load_reference("one", tmp_path / "refs"), reference.load_reference("tiny", tmp_path / "refs")
+    refs = tmp_path / "refs"
+    full, rounded = reference.load_reference("one", refs), reference.load_reference("tiny", refs)
     a, b = full.droplets(-1), rounded.droplets(-1)
     for column in ("x", "y", "z", "u", "v", "w", "diameter", "density", "age"):
         assert np.all(np.abs(b[column] - a[column]) <= 2.0 ** -(bits[0] + 1) * np.abs(a[column])), column
