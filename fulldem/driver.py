@@ -108,9 +108,9 @@ def check_case(case) -> None:
     the box into whole cubic cells, fewer than :data:`MIN_CELLS` cells along an axis, a grid too large for the
     machine's memory, a smoothing kernel wider than the box or one the filtered kernel cannot have, or a given DEM
     step that resolves the shortest contact with fewer than :data:`MIN_CONTACT_STEPS` steps (a DEM step equal to
-    the fluid step, say), or a fluid step above the explicit viscous limit h^2 / (6 nu) of
-    :func:`fulldem.fluid.solver.stable_dt` (twice the slag's viscosity at 2.5 mm cells and the 4 ms step: the slag's
-    velocity doubled every step and the run stopped on a runaway overlap at 0.58 s)."""
+    the fluid step, say), or a fluid step above the explicit viscous limit h^2 / (6 nu)
+    (:func:`fulldem.fluid.solver.viscous_limit`; twice the slag's viscosity at 2.5 mm cells and the 4 ms step: the
+    slag's velocity doubled every step and the run stopped on a runaway overlap at 0.58 s)."""
     g, fd = case.geometry, case.fulldem
     edges = {"geometry.width": g.width, "geometry.depth": g.depth, "geometry.height": g.height}
     counts = {k: v / fd.cell_size for k, v in edges.items()}
@@ -149,15 +149,14 @@ def check_case(case) -> None:
                             f"pair's, {duration:.3g} s) with {duration / fd.dem_step:.3g} steps; allowed: 0 (chosen "
                             f"from the contact time, fulldem.contact_steps per contact) or at most {most:.3g} s "
                             f"({MIN_CONTACT_STEPS} steps per contact, the fewest fulldem.contact_steps allows)")
-    nu = case.slag_viscosity / case.slag.density
-    viscous_limit = fd.cell_size**2 / (6.0 * nu)
-    if fd.fluid_step > viscous_limit:
+    limit = fl.viscous_limit(fd.cell_size, case.slag.density, case.slag_viscosity)
+    if fd.fluid_step > limit:
         raise CaseError(f"fulldem.fluid_step = {fd.fluid_step:g} s: above the explicit viscous limit h^2 / (6 nu) = "
-                        f"{viscous_limit:.3g} s of cells of h = {fd.cell_size:g} m in slag of nu = {nu:.3g} m^2/s "
-                        f"(viscosity {case.slag_viscosity:.3g} Pa s at {case.slag.temperature:g} K); the slag's "
-                        f"velocity grows without bound; allowed: fluid_step <= {viscous_limit:.3g} s (the reference runs keep "
-                        f"nu dt / h^2 <= 0.1, i.e. fluid_step <= {0.6 * viscous_limit:.3g} s, where packed droplets "
-                        f"shrink the slag's share of a cell)")
+                        f"{limit:.3g} s of cells of h = {fd.cell_size:g} m in slag of viscosity "
+                        f"{case.slag_viscosity:.3g} Pa s (at {case.slag.temperature:g} K), where the slag's velocity "
+                        f"grows without bound; allowed: fluid_step <= {limit:.3g} s (the reference runs keep "
+                        f"nu dt / h^2 <= 0.1, i.e. fluid_step <= {0.6 * limit:.3g} s, where packed droplets shrink "
+                        "the slag's share of a cell)")
     if fd.near_wall == "wall" and fd.kernel != "filtered":
         raise CaseError(f"fulldem.near_wall = 'wall' with fulldem.kernel = {fd.kernel!r}: the walls' faces enter the "
                         "filtered kernel's trilinear weights only; allowed: near_wall = 'interior', or kernel = "

@@ -177,7 +177,10 @@ SCHEMA: dict[str, dict[str, Field]] = {
     "fulldem": {
         "cell_size": Field(F, "m", "Fluid grid spacing (cubic cells; must divide the box).", 0.0,
                            exclusive_minimum=True),
-        "fluid_step": Field(F, "s", "Fluid (CFD) time step; DEM sub-steps fill it. At most h^2 / (6 nu), the explicit viscous limit (0.0292 s for 5 mm cells in slag of 0.45 Pa s; a quarter of that at 2.5 mm cells, half again at twice the viscosity).", 0.0, exclusive_minimum=True),
+        "fluid_step": Field(F, "s", "Fluid (CFD) time step; DEM sub-steps fill it. At most h^2 / (6 nu), the "
+                                    "explicit viscous limit (0.0292 s for 5 mm cells in slag of 0.45 Pa s; a quarter "
+                                    "of that at 2.5 mm cells, half again at twice the viscosity).", 0.0,
+                            exclusive_minimum=True),
         "dem_step": Field(F, "s", "DEM time step; 0 chooses it from the contact time (contact_steps per contact).",
                           0.0),
         "contact_steps": Field(I, "-", "DEM steps per contact duration when dem_step = 0.", 5),

@@ -430,6 +430,7 @@ def test_the_viscous_limit_is_where_the_explicit_step_turns_unstable(periodic):
     grid = Grid((10, 10, 10), 0.0025, periodic=periodic)
     boundary = fluid_walls.make_boundary(grid)
     limit = grid.spacing**2 / (6.0 * viscosity / density)
+    assert fluid_solver.viscous_limit(grid.spacing, density, viscosity) == pytest.approx(limit, rel=1e-12)
     assert fluid_solver.stable_dt(grid, fluid_solver.rest_state(grid), density, viscosity) == pytest.approx(limit)
 
     def energy_ratio(factor):

@@ -242,15 +242,23 @@ def _no_lap(name):
     """The timer of an untimed step."""
 
 
+def viscous_limit(spacing, density, viscosity) -> float:
+    """The explicit viscous limit h^2 / (6 nu) [s] of cells of edge ``spacing`` h [m] (nu = viscosity / density):
+    the largest stable step without flow (:func:`stable_dt`), which fulldem.driver.check_case enforces; inf for
+    nu = 0."""
+    return math.inf if viscosity == 0.0 else spacing**2 * density / (6.0 * viscosity)
+
+
 def stable_dt(grid, state, density, viscosity, cfl=0.5) -> float:
     """Largest step [s] with dt (U / h + 3 nu / h^2) <= cfl, U = max|u| + max|v| + max|w|.
 
     With the default cfl = 0.5 this is the forward-Euler (hence SSP-RK2) bound 2 U dt / h + 6 nu dt / h^2 <= 1 of
-    the TVD schemes; without flow it is the viscous limit h^2 / (6 nu) (0.029 s for h = 5 mm in slag).
+    the TVD schemes; without flow it is the viscous limit h^2 / (6 nu) (:func:`viscous_limit`; 0.029 s for h = 5 mm
+    in slag).
     """
     h = grid.spacing
     speed = sum(float(np.abs(a).max()) for a in (state.u, state.v, state.w))
-    rate = speed / h + 3.0 * (viscosity / density) / h**2
+    rate = speed / h + 0.5 / viscous_limit(h, density, viscosity)
     return math.inf if rate == 0.0 else cfl / rate
 
 
