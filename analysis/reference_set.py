@@ -1,7 +1,8 @@
 """A run set's reference runs: every finished run of a run-set sweep of the full engine stored small
 (:func:`analysis.reference.store_reference`) under its run name, with what each run's own folder alone can measure:
 the kernel runs' exposure (:mod:`analysis.kernel_run`), collisions by height (:mod:`analysis.band_efficiency`) and
-what the return flow lifts off the floor (:mod:`analysis.floor_lift`). Command line::
+what the return flow lifts off the floor (:mod:`analysis.floor_lift`) and the matte layer over it
+(:mod:`analysis.floor_layer`). Command line::
 
     python -m analysis.reference_set SWEEP_OUT SET_FILE [--only a,b] [--dest data/reference] [--snapshots 2]
 
@@ -25,7 +26,8 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
     with the kernel runs' exposure (:mod:`analysis.kernel_run`), for runs with coalescence and a merge table their
     collisions by height (:data:`analysis.band_efficiency.COLLISIONS_FILE`), and for runs whose snapshots follow
     the droplets by ident what the return flow lifts off the floor (:data:`analysis.floor_lift.FLOOR_LIFT_FILE`),
-    both measured on the run folder.
+    and the matte layer over the floor by size (:data:`analysis.floor_layer.FLOOR_LAYER_FILE`), all measured on the
+    run folder.
     ``snapshots`` is the droplet snapshots each run keeps where its entry in the set has no ``snapshots`` key. Returns
     name -> the stored folder, or -> why it was not stored (not finished)."""
     from analysis.sweep.execution import DONE_FILE, POINTS, point_hash
@@ -65,6 +67,13 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
 
         try:
             write_floor_lift(folder, results[run.name])
+        except (ValueError, NoData):
+            pass
+        # the matte layer over the floor, by size, from every droplet snapshot in the window (analysis.floor_layer)
+        from analysis.floor_layer import write_floor_layer
+
+        try:
+            write_floor_layer(folder, results[run.name])
         except (ValueError, NoData):
             pass
     return results

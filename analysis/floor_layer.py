@@ -1,0 +1,201 @@
+"""The matte layer over the floor, by size: the measure behind the thickness of popbal's bottom layer
+(``bottom_layer_factor``, ``bottom_layer_form``; popbal.closures, the bottom layer).
+
+Over a full run's steady window (its last third if none; :func:`analysis.steady.window_snapshots`) the droplets'
+lowest points, z - d / 2 above the floor, are counted in :data:`BIN` high bins up to :data:`TOP` (at most 0.4 of the
+slag height), over the whole floor and per size bin (:data:`EDGES`), as a mean over the window's droplet snapshots:
+n(z) [1/m], droplets per metre of height. A layer is an excess over the far value n_far (the mean over
+:data:`FAR` above the floor) that peaks at the floor; its *excess thickness* is
+
+    delta = sum_z max(n(z) - n_far, 0) dz / (n(0) - n_far)   [m],
+
+n(0) the lowest bin's, the height a layer of the floor's excess concentration would fill. The same with droplet
+volume instead of number gives the layer's thickness over all sizes (the table's header). NaN where the floor bin
+holds fewer than :data:`MIN_FLOOR` droplets per snapshot, or does not exceed 1.5 n_far (no layer). For an excess
+A exp(-z / lambda) the estimate is dz / (1 - exp(-dz / lambda)) (lambda + dz / 2 for lambda >> dz; the tests).
+
+What it measures (2026-12-06, the remade training runs' point folders, docs/guide/reduced-model.md): in every
+coalescing run of the demo's families the layer is 2.5-5 mm thick for every droplet size alike (0.4 to 2 mm, own
+settling velocities 0.4 to 6 mm/s), so it is not a sedimentation-dispersion layer (whose thickness D / U would
+fall 15-fold over those sizes) but a layer of the flow: where the plume's discharge slows against the floor, its
+droplets slow to their own settling velocity and gather. ``python -m analysis.floor_layer RUN...`` prints the table;
+:func:`write_floor_layer` stores it beside a reference run (:data:`FLOOR_LAYER_FILE`, written by
+``python -m analysis.reference_set``).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+#: Height of the profile's bins [m].
+BIN = 1e-3
+#: The profile's top above the floor [m] (at most 0.4 of the slag height).
+TOP = 40e-3
+#: The far value's span above the floor [m] (scaled with TOP where the slag is lower).
+FAR = (30e-3, 40e-3)
+#: Size-bin edges [m] of the table (the last bin open above).
+EDGES = np.array([0.0, 0.45, 0.55, 0.65, 0.8, 1.0, 1.3, 2.0, np.inf]) * 1e-3
+#: Fewest droplets per snapshot in a bin's floor bin for a thickness.
+MIN_FLOOR = 3.0
+#: The stored table's name beside a reference run.
+FLOOR_LAYER_FILE = "floor_layer.csv"
+#: Its columns: name -> (unit, meaning).
+FLOOR_LAYER_UNITS = {
+    "diameter_low": ("m", "size bin's lower edge"),
+    "diameter_high": ("m", "size bin's upper edge (inf: open)"),
+    "mean_diameter": ("m", "mean diameter of the bin's droplets in the floor bin"),
+    "settling_velocity": ("m/s", "their own terminal settling velocity at that diameter"),
+    "floor_number": ("1/m", "droplets per metre of height in the lowest bin, whole floor, mean over snapshots"),
+    "far_number": ("1/m", "the same, mean over the far span"),
+    "thickness": ("m", "excess thickness delta of the bin's layer (NaN: no layer)"),
+}
+
+
+def excess_thickness(profile, bin_height: float = BIN, far: slice | None = None) -> float:
+    """delta [m] of ``profile`` (values per bin from the floor up, each ``bin_height`` [m] high; module docstring),
+    its far value the mean over the bins ``far`` (default: the top quarter). NaN where the floor bin does not
+    exceed 1.5 times the far value."""
+    n = np.asarray(profile, dtype=float)
+    far = far if far is not None else slice(3 * len(n) // 4, len(n))
+    n_far = float(n[far].mean())
+    if not n[0] > 1.5 * n_far:
+        return math.nan
+    return float(np.sum(np.maximum(n - n_far, 0.0)) * bin_height / (n[0] - n_far))
+
+
+def layer_profiles(snapshots, height: float, edges=EDGES) -> dict:
+    """{"heights" (bin bottoms [m]), "number" (size bins x height bins [1/m]), "volume" (height bins [m^3/m]),
+    "diameter_sum" (size bins: summed diameters in the floor bin [m]), "far" (the far span's slice)} over
+    ``snapshots``, a list of DataFrames with z [m] (centre above the floor) and diameter [m]; means over them.
+    ValueError without snapshots."""
+    if not snapshots:
+        raise ValueError("no droplet snapshot in the window: the floor layer needs one or more")
+    top = min(TOP, 0.4 * height)
+    bins = max(int(round(top / BIN)), 4)
+    z_edges = np.arange(bins + 1) * BIN
+    scale = bins * BIN / TOP
+    far = slice(int(round(FAR[0] * scale / BIN)), int(round(FAR[1] * scale / BIN)))
+    sizes = len(edges) - 1
+    number = np.zeros((sizes, bins))
+    volume = np.zeros(bins)
+    diameter_sum = np.zeros(sizes)
+    for frame in snapshots:
+        d = frame["diameter"].to_numpy(dtype=float)
+        low = frame["z"].to_numpy(dtype=float) - 0.5 * d
+        size = np.clip(np.digitize(d, edges) - 1, 0, sizes - 1)
+        for k in range(sizes):
+            number[k] += np.histogram(low[size == k], z_edges)[0]
+        volume += np.histogram(low, z_edges, weights=np.pi / 6.0 * d**3)[0]
+        floor = (low >= 0.0) & (low < BIN)
+        np.add.at(diameter_sum, size[floor], d[floor])
+    count = len(snapshots)
+    return {"heights": z_edges[:-1], "number": number / (count * BIN), "volume": volume / (count * BIN),
+            "diameter_sum": diameter_sum / count, "far": far}
+
+
+def layer_table(profiles, case=None) -> tuple[pd.DataFrame, float]:
+    """(table per size bin, thickness of the layer by volume [m]) of :func:`layer_profiles`; each bin's settling
+    velocity from ``case`` (settler.derived.settling_velocity; NaN without one)."""
+    number, far = profiles["number"], profiles["far"]
+    rows = []
+    for k in range(number.shape[0]):
+        floor_count = number[k, 0] * BIN
+        mean_d = profiles["diameter_sum"][k] / floor_count if floor_count > 0 else math.nan
+        thick = excess_thickness(number[k], BIN, far) if floor_count >= MIN_FLOOR else math.nan
+        rows.append({"diameter_low": EDGES[k], "diameter_high": EDGES[k + 1], "mean_diameter": mean_d,
+                     "floor_number": number[k, 0], "far_number": float(number[k, far].mean()), "thickness": thick})
+    table = pd.DataFrame(rows)
+    velocity = np.full(len(table), math.nan)
+    known = table["mean_diameter"].notna().to_numpy()
+    if case is not None and known.any():
+        from settler.derived import settling_velocity
+
+        velocity[known] = settling_velocity(case, table["mean_diameter"].to_numpy()[known])
+    table.insert(3, "settling_velocity", velocity)
+    return table, excess_thickness(profiles["volume"], BIN, far)
+
+
+def measure_floor_layer(run, window: tuple[float, float] | None = None) -> tuple[pd.DataFrame, dict]:
+    """(table, meta) of a full run folder or :class:`analysis.Run` over ``window`` (default: its steady window, else
+    its last third): :func:`layer_table` of its droplet snapshots there; meta {"window", "snapshots", "thickness"
+    (by volume, all sizes [m])}. ValueError where the window holds no droplet snapshot."""
+    from .runs import load_run
+    from .steady import window_snapshots
+
+    run = run if hasattr(run, "timeseries") else load_run(run)
+    window, times = window_snapshots(run, window)
+    profiles = layer_profiles([run.droplets(t)[1] for t in times], run.case.geometry.height)
+    table, thickness = layer_table(profiles, run.case)
+    return table, {"window": (float(window[0]), float(window[1])), "snapshots": list(times), "thickness": thickness}
+
+
+def write_floor_layer(run_folder, dest, window: tuple[float, float] | None = None) -> Path:
+    """Measure ``run_folder`` over ``window`` (:func:`measure_floor_layer`) and write :data:`FLOOR_LAYER_FILE` into
+    ``dest`` atomically, the window, the thickness by volume and the snapshots in its header."""
+    from settler.output import atomic_write_text, units_line
+
+    table, meta = measure_floor_layer(run_folder, window)
+    header = (units_line(FLOOR_LAYER_UNITS)
+              + f"# window: {meta['window'][0]!r} {meta['window'][1]!r} s; thickness: {meta['thickness']!r} m; "
+              "snapshots: " + " ".join(repr(float(t)) for t in meta["snapshots"]) + "\n")
+    path = Path(dest) / FLOOR_LAYER_FILE
+    atomic_write_text(path, header + table.to_csv(index=False, float_format="%.7g"))
+    return path
+
+
+def read_floor_layer(path) -> tuple[pd.DataFrame, dict]:
+    """The (table, meta) a :func:`write_floor_layer` file holds (meta: window, thickness, snapshots)."""
+    lines = Path(path).read_text().splitlines()
+    head = next(line for line in lines[:3] if line.startswith("# window:"))
+    fields = dict(part.strip().split(": ", 1) for part in head[2:].split(";"))
+    meta = {"window": tuple(float(x) for x in fields["window"].split()[:2]),
+            "thickness": float(fields["thickness"].split()[0]),
+            "snapshots": [float(x) for x in fields["snapshots"].split()]}
+    return pd.read_csv(path, comment="#"), meta
+
+
+def main(argv=None) -> int:
+    import argparse
+    import sys
+
+    from settler.errors import OutputError
+
+    from .steady import parse_window
+
+    parser = argparse.ArgumentParser(prog="python -m analysis.floor_layer",
+                                     description="the matte layer over the floor of full runs, by size (the measure "
+                                                 "of popbal's bottom layer thickness)")
+    parser.add_argument("runs", nargs="+", help="full run folders or stored references (one snapshot gives a noisy "
+                                                "profile; a run folder's every snapshot in the window is used)")
+    parser.add_argument("--window", help="START:END [s]; default each run's steady window, else its last third")
+    args = parser.parse_args(argv)
+    try:
+        window = parse_window(args.window) if args.window else None
+    except ValueError as exc:
+        print(f"{parser.prog}: {exc}", file=sys.stderr)
+        return 2
+    for folder in args.runs:
+        try:
+            table, meta = measure_floor_layer(folder, window)
+        except (OutputError, ValueError, OSError) as exc:
+            print(f"{parser.prog}: {folder}: {exc}", file=sys.stderr)
+            return 2
+        print(f"{folder}: {meta['window'][0]:g}-{meta['window'][1]:g} s, {len(meta['snapshots'])} snapshots; "
+              f"layer thickness by volume {meta['thickness'] * 1e3:.2f} mm")
+        show = table.copy()
+        for column in ("diameter_low", "diameter_high", "mean_diameter", "thickness"):
+            show[column] *= 1e3
+        show["settling_velocity"] *= 1e3
+        print(show.rename(columns={"diameter_low": "d_low [mm]", "diameter_high": "d_high [mm]",
+                                   "mean_diameter": "d [mm]", "settling_velocity": "U [mm/s]",
+                                   "floor_number": "n(0) [1/m]", "far_number": "n_far [1/m]",
+                                   "thickness": "delta [mm]"}).to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
