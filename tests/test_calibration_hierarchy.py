@@ -608,3 +608,54 @@ def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path,
         assert "not scored (runs the registry names are not stored yet" in result.summary()
     else:
         assert "whole" not in result.missing
+
+
+def test_channel_kernel_from_the_collisions_by_height_of_a_run(tmp_path):
+    """The channel's kernel by hand from a stand-in run (the demo's case) of four bands, the floor's and the roof's
+    left out: the middle two under the inlet hold merges M, well-mixed collisions C_g + C_s, cell-by-cell C_cell and
+    shear rate G (weighted by the droplets held). popbal's channel at the inlet form with factor 0.5 has R_c = half
+    the inlet radius, so its section is a quarter of the inlet's and E_ch = M / (4 (C_g + C_s)); u_s is the steady
+    plume law sqrt(c_ch Q drho g / (pi mu)) (transport factor 1), the shear coefficient G R_c / u_s; the collision
+    radius is the inlet radius times sqrt(C_g / C_cell). A run without merges there is refused by name."""
+    import shutil
+    from pathlib import Path
+
+    from analysis.band_efficiency import COLLISIONS_FILE, COLLISIONS_UNITS
+    from analysis.calibration.hierarchy import channel_kernel_from_collisions
+    from settler.cases import load_case
+    from settler.output import units_line
+
+    root = Path(__file__).resolve().parents[1]
+    folder = tmp_path / "a"
+    folder.mkdir()
+    shutil.copy(root / "data" / "reference" / "demo" / "case.toml", folder / "case.toml")
+    rows = pd.DataFrame({column: [1.0] * 4 for column in COLLISIONS_UNITS})
+    rows["z"] = [0.0875, 0.0125, 0.0375, 0.0625]  # unsorted: the first row is the top band, the second the floor's
+    rows["merges_under_inlet"] = [1e6, 1e6, 300.0, 500.0]
+    rows["mixed_under_inlet"] = [1e6, 1e6, 100.0, 150.0]
+    rows["mixed_shear_under_inlet"] = [1e6, 1e6, 40.0, 60.0]
+    rows["gravitational_under_inlet"] = [1e6, 1e6, 400.0, 600.0]
+    rows["shear_rate_under_inlet"] = [1e3, 1e3, 2.0, 4.0]
+    rows["held"] = [1e6, 1e6, 100.0, 300.0]
+    header = (units_line(COLLISIONS_UNITS)
+              + "# window: 10.0 20.0 s; cell: 0.005 m; rate_scatter: 0.01; snapshots: 10.0 20.0\n")
+    (folder / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
+    values = {"popbal.channel_radius_form": "inlet", "popbal.channel_radius_factor": 0.5,
+              "popbal.channel_coefficient": 0.4, "popbal.confinement": False}
+    got = channel_kernel_from_collisions(["a"], tmp_path, values)["per_run"]["a"]
+    case = load_case(folder / "case.toml")
+    inlet_radius = 0.5 * case.geometry.inlet_diameter
+    q = case.feed.mass_rate / case.matte.density
+    u_s = math.sqrt(0.4 * q * (case.matte.density - case.slag.density) * 9.80665 / (math.pi * case.slag_viscosity))
+    assert got["channel_radius"] == pytest.approx(0.5 * inlet_radius, rel=1e-12)
+    assert got["plume_velocity"] == pytest.approx(u_s, rel=1e-6)
+    assert got["efficiency"] == pytest.approx(800.0 / (4.0 * 350.0), rel=1e-12)
+    assert got["shear_rate"] == pytest.approx((2.0 * 100 + 4.0 * 300) / 400, rel=1e-12)
+    assert got["shear_coefficient"] == pytest.approx(3.5 * 0.5 * inlet_radius / u_s, rel=1e-6)
+    assert got["collision_radius"] == pytest.approx(inlet_radius * math.sqrt(250.0 / 1000.0), rel=1e-12)
+    assert got["cell_efficiency"] == pytest.approx(0.8, rel=1e-12)
+
+    rows["merges_under_inlet"] = [1e6, 1e6, 0.0, 0.0]
+    (folder / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
+    with pytest.raises(ValueError, match="a/collisions_by_height.csv: no merges"):
+        channel_kernel_from_collisions(["a"], tmp_path, values)

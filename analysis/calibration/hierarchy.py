@@ -385,6 +385,72 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
             "runs": list(runs), "thickness": thickness}
 
 
+def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict | None = None) -> dict:
+    """The plume channel's own kernel [-] as popbal's channel would apply it, from each full run's zone diagnostics
+    (``collisions_by_height.csv``, over the steady window it was stored with; :mod:`analysis.band_efficiency`) in the
+    bands between the top one (the roof's) and the bottom one (the floor's, popbal's bottom layer), under the inlet
+    (its disk or slot extended down, area A_in):
+
+    - popbal's channel at the [popbal] ``values`` (dotted keys, e.g. {"popbal.channel_radius_factor": 4.94}, on
+      each run's own case.toml, with its calibration layer set aside): its radius R_c, plume velocity u_s and
+      transport factor t (:func:`popbal.model.channel_closure`);
+    - efficiency E_ch = merges / C_ch, C_ch = (C_g + C_s) A_in / (pi R_c^2): the bands' gravitational and shear
+      collisions of the droplets well mixed under the inlet (the shear at the slag's own rate at them) carried over
+      to the droplets mixed over the channel's section, as popbal's channel holds them (a pair sum scales as the
+      inverse of the volume);
+    - shear coefficient G R_c / (t u_s), G the slag's shear rate at the bands' droplets (mean over the bands weighted
+      by the droplets held): popbal shears its channel at G = shear_coefficient t u_s / R_c;
+    - collision radius sqrt(A_in / pi) sqrt(C_g,mixed / C_g,cell) [m]: the radius of the disk over which the bands'
+      droplets, well mixed, would collide as often as they do cell by cell (how compact the plume keeps them), and
+      the cell-by-cell efficiency merges / C_g,cell.
+
+    E_ch and the shear coefficient as geometric means over the runs; per run in "per_run". A run without the table,
+    its well-mixed shear columns or merges between the top and bottom bands is refused by name, as is an empty list of runs."""
+    from analysis.band_efficiency import COLLISIONS_FILE, read_collisions
+    from fulldem.boundaries import Inlet
+    from popbal.model import channel_closure
+    from settler.cases import NO_CALIBRATION, load_case
+
+    if not runs:
+        raise ValueError("the channel kernel needs at least one stored run with coalescence; none was given")
+    per_run = {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        path = folder / COLLISIONS_FILE
+        if not path.is_file():
+            raise FileNotFoundError(f"{folder}: no {COLLISIONS_FILE} (stored runs measure it when made with "
+                                    "merges_by_height.csv, a04ea13 or later); the channel kernel needs it")
+        table, _ = read_collisions(path)
+        if "mixed_shear_under_inlet" not in table:
+            raise FileNotFoundError(f"{path}: no well-mixed shear collisions (stored before 2026-12-05); store the "
+                                    "run again from its run folder (python -m analysis.reference_set)")
+        below = table.sort_values("z").iloc[1:-1]
+        merges = float(below["merges_under_inlet"].sum())
+        mixed = float(below["mixed_under_inlet"].sum())
+        mixed_shear = float(below["mixed_shear_under_inlet"].sum())
+        cell = float(below["gravitational_under_inlet"].sum())
+        if not (merges > 0.0 and mixed > 0.0 and cell > 0.0 and math.isfinite(mixed_shear)):
+            raise ValueError(f"{path}: no merges, collisions or shear rate under the inlet between the top and "
+                             "bottom bands; the channel kernel needs a run with coalescence measured on its whole slag grid")
+        case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION, **(values or {})})
+        g = case.geometry
+        radius, velocity, _, transport = channel_closure(case)
+        inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, g.height, g.inlet_length or 0.0).area
+        collisions = (mixed + mixed_shear) * inlet / (math.pi * radius**2)
+        held = below["held"].to_numpy()
+        rate = float(np.average(below["shear_rate_under_inlet"].to_numpy(), weights=held))
+        per_run[run] = {"efficiency": merges / collisions, "shear_coefficient": rate * radius / (transport * velocity),
+                        "shear_rate": rate, "channel_radius": radius, "plume_velocity": velocity,
+                        "collision_radius": math.sqrt(inlet / math.pi * mixed / cell),
+                        "cell_efficiency": merges / cell}
+
+    def mean(key):
+        return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
+
+    return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
+            "runs": list(runs)}
+
+
 def _stored(runs, reference_dir) -> tuple[list[str], list[str]]:
     root = Path(reference_dir)
     have = [r for r in runs if (root / r / "timeseries.csv").is_file()]
