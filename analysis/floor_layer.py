@@ -193,7 +193,8 @@ def main(argv=None) -> int:
         print(show.rename(columns={"diameter_low": "d_low [mm]", "diameter_high": "d_high [mm]",
                                    "mean_diameter": "d [mm]", "settling_velocity": "U [mm/s]",
                                    "floor_number": "n(0) [1/m]", "far_number": "n_far [1/m]",
-                                   "thickness": "delta [mm]"}).to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+                                   "thickness": "delta [mm]"}).to_string(index=False,
+                                                                         float_format=lambda x: f"{x:.4g}"))
     return 0
 
 

@@ -405,7 +405,8 @@ def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict
       the cell-by-cell efficiency merges / C_g,cell.
 
     E_ch and the shear coefficient as geometric means over the runs; per run in "per_run". A run without the table,
-    its well-mixed shear columns or merges between the top and bottom bands is refused by name, as is an empty list of runs."""
+    its well-mixed shear columns or merges between the top and bottom bands is refused by name, as is an empty list
+    of runs."""
     from analysis.band_efficiency import COLLISIONS_FILE, read_collisions
     from fulldem.boundaries import Inlet
     from popbal.model import channel_closure
@@ -431,7 +432,8 @@ def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict
         cell = float(below["gravitational_under_inlet"].sum())
         if not (merges > 0.0 and mixed > 0.0 and cell > 0.0 and math.isfinite(mixed_shear)):
             raise ValueError(f"{path}: no merges, collisions or shear rate under the inlet between the top and "
-                             "bottom bands; the channel kernel needs a run with coalescence measured on its whole slag grid")
+                             "bottom bands; the channel kernel needs a run with coalescence measured on its whole "
+                             "slag grid")
         case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION, **(values or {})})
         g = case.geometry
         radius, velocity, _, transport = channel_closure(case)
