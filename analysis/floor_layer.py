@@ -128,6 +128,9 @@ def measure_floor_layer(run, window: tuple[float, float] | None = None) -> tuple
 
     run = run if hasattr(run, "timeseries") else load_run(run)
     window, times = window_snapshots(run, window)
+    if not times:
+        raise ValueError(f"no droplet snapshot within {window[0]:g}-{window[1]:g} s: the floor layer needs one or more "
+                         "(a stored reference keeps few; give the run folder or another window)")
     profiles = layer_profiles([run.droplets(t)[1] for t in times], run.case.geometry.height)
     table, thickness = layer_table(profiles, run.case)
     return table, {"window": (float(window[0]), float(window[1])), "snapshots": list(times), "thickness": thickness}
