@@ -187,6 +187,14 @@ popbal's plume velocity, so the bottom layer's droplets may reach the floor at U
 the plume's droplet velocity (transport x u_s); with coalescence they cross 3-13 times faster, mostly by growing.
 All three are exploratory closures, not yet calibrated (no stored layer sets them).
 
+The plume channel's own efficiency (``channel_collision_efficiency`` E_ch; absent: collision_efficiency). The
+channel holds its droplets well mixed over pi R_c^2, where the full runs' plume keeps them closer to the axis: the
+merges under the inlet between the floor's and the roof's height bands over the same droplets' collisions mixed over
+popbal's channel section are 1.4 / 2.3 / 5.3 at half / one / twice the demo's feed at 2.5 mm cells, 1.4-1.5 in simple
+and cubic, 1.0-2.3 in deep's columns, where cell by cell the engine merges 1.5-2.6 pairs per gravitational collision
+(:func:`analysis.calibration.hierarchy.channel_kernel_from_collisions`; 2026-12-06, docs/guide/reduced-model.md).
+E_ch multiplies both kernels in the channel zone and nowhere else; no law sets it yet and no stored layer has it.
+
 The bottom layer's lift into the return flow (``bottom_lift_share`` lambda, ``bottom_lift_velocity_ratio`` beta).
 Resolved, the floor does give droplets back. The demo at 2.5 mm cells, continued from its stored 25 s run to 60 s
 at the set's engine (exploratory, 2026-12-06; docs/guide/reduced-model.md), holds 3 800-5 600 droplets in the return

@@ -411,7 +411,8 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
             _reach_floor(model, work, books, area)
         books.lost += work.sink_out * area
         if p["coalescence"]:
-            efficiency = p["roof_efficiency"] if zone == ROOF else p["efficiency"]
+            efficiency = p["roof_efficiency"] if zone == ROOF else \
+                p["channel_efficiency"] if zone == CHANNEL else p["efficiency"]
             before = content[zone, :, NUMBER, :].sum(axis=1)
             most = max(most, coalesce_zone(
                 content[zone], work.diameters[zone], work.velocities[zone], work.densities[zone],

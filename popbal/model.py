@@ -255,6 +255,8 @@ def build(case: Case) -> Model:
         # the roof layer's own kernel and the bottom layer's drainage (popbal.closures); absent: the channel's, none
         "roof_efficiency": p.collision_efficiency if p.roof_collision_efficiency is None
         else p.roof_collision_efficiency,
+        "channel_efficiency": p.collision_efficiency if p.channel_collision_efficiency is None
+        else p.channel_collision_efficiency,
         "roof_shear_coefficient": p.shear_coefficient if p.roof_shear_coefficient is None
         else p.roof_shear_coefficient,
         # the plume's discharge pushes the bottom layer's droplets into the floor at bottom_drain_coefficient x the
@@ -275,6 +277,10 @@ def build(case: Case) -> Model:
         "growth_target": c.growth_target,
         "growth_rate": c.growth_rate,
     }
+    if p.channel_collision_efficiency is not None and channel_area == 0.0:
+        raise CaseError(f"popbal.channel_collision_efficiency = {p.channel_collision_efficiency!r}: sets the kernel "
+                        "of a channel zone this case does not have; allowed only with popbal.channel_radius_factor > 0 "
+                        "(or leave it out)")
     for key, layer, needs in (("roof_collision_efficiency", roof_volume > 0.0, "popbal.roof_layer_coefficient and "
                                "popbal.roof_thickness"),
                               ("roof_shear_coefficient", roof_volume > 0.0, "popbal.roof_layer_coefficient and "

@@ -276,6 +276,13 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                                    "engine's local efficiency times how the droplets cluster inside "
                                                    "the layer (popbal.closures); absent: collision_efficiency.", 0.0,
                                            optional=True),
+        "channel_collision_efficiency": Field(F, "-", "Collision efficiency of the plume channel below the roof: its "
+                                                      "merges over the collisions of its droplets well mixed over the "
+                                                      "channel's section pi R_c^2, i.e. the engine's local efficiency "
+                                                      "times how compact the plume keeps its droplets within R_c "
+                                                      "(popbal.closures; measured by analysis.calibration.hierarchy."
+                                                      "channel_kernel_from_collisions); absent: "
+                                                      "collision_efficiency.", 0.0, optional=True),
         "roof_shear_coefficient": Field(F, "-", "The roof layer's shear rate G in units of u_L / delta, the layer's "
                                                 "drainage velocity over its thickness (popbal.closures); absent: "
                                                 "shear_coefficient.", 0.0, optional=True),

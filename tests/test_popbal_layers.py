@@ -243,6 +243,38 @@ def test_roof_kernel_keys_scale_the_roof_layers_merges_alone():
     assert (two - no_shear) / (one - no_shear) == pytest.approx(2.0, rel=0.02)
 
 
+def _early_channel_merges(extra):
+    """The merges per zone after 1 s of the demo's feed, half into its plume channel and half spread over the outer
+    zone (no layers; coalescence on, reaction off): early, so that merging has not yet changed what the zones hold
+    much, and the outer zone merges its own feed."""
+    model = popbal.setup("demo", ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
+                                  "popbal.channel_feed_fraction=0.5",
+                                  "reaction.enabled=false", "popbal.collision_efficiency=1",
+                                  "popbal.shear_coefficient=0.5", "popbal.end_time=1.0",
+                                  "popbal.output_interval=1.0"] + extra)
+    result = popbal.run(model, progress=False)
+    return np.asarray(result.arrays["merges"][-1], dtype=float).sum(axis=1), result  # per zone
+
+
+def test_channel_efficiency_scales_the_channels_merges_alone():
+    """popbal.channel_collision_efficiency multiplies both kernels in the channel zone and nowhere else: absent it is
+    collision_efficiency (the same run bit for bit); at twice that the channel's early merges double (2 %), while the
+    outer zone's, fed apart and getting nothing from the channel yet, do not move (1e-6)."""
+    base, reference = _early_channel_merges([])
+    _, same = _early_channel_merges(["popbal.channel_collision_efficiency=1"])
+    assert np.array_equal(same.arrays["number_density"], reference.arrays["number_density"])
+    doubled, _ = _early_channel_merges(["popbal.channel_collision_efficiency=2"])
+    print(f"\nmerges per zone at 1 s (channel, outer, roof, bottom): {base}; channel efficiency 2: {doubled}")
+    assert base[CHANNEL] > 0.0 and doubled[CHANNEL] / base[CHANNEL] == pytest.approx(2.0, rel=0.02)
+    assert base[OUTER] > 0.0 and doubled[OUTER] == pytest.approx(base[OUTER], rel=1e-6)
+
+
+def test_channel_efficiency_without_a_channel_is_refused():
+    with pytest.raises(CaseError, match="popbal.channel_collision_efficiency = 2.0: sets the kernel of a channel zone this case"):
+        popbal.setup("demo", ["popbal.channel_radius_factor=0", "popbal.channel_feed_fraction=0",
+                              "popbal.channel_collision_efficiency=2"])
+
+
 @pytest.mark.parametrize("key", ["roof_collision_efficiency", "roof_shear_coefficient", "bottom_drain_coefficient"])
 def test_layer_kernel_keys_without_their_layer_are_refused(key):
     with pytest.raises(CaseError, match=f"popbal.{key} = 2.0: sets a layer this case does not have"):
