@@ -56,6 +56,8 @@ import pandas as pd
 from settler.derived import settling_velocity
 from settler.output import PROFILE_BANDS
 
+from .files import read_window_header, window_header
+
 
 def pair_sums(group, diameter, velocity) -> tuple[np.ndarray, np.ndarray]:
     """(the distinct values of ``group`` (n,) [int], for each the sum over the pairs of its droplets of
@@ -415,9 +417,8 @@ def write_collisions(run_folder, dest) -> Path:
     from settler.output import atomic_write_text, units_line
 
     table, meta = measure_collisions(run_folder)
-    header = (units_line(COLLISIONS_UNITS) + f"# window: {meta['window'][0]!r} {meta['window'][1]!r} s; cell: "
-              f"{meta['cell']!r} m; rate_scatter: {meta['rate_scatter']!r}; snapshots: "
-              + " ".join(repr(t) for t in meta["snapshots"]) + "\n")
+    header = units_line(COLLISIONS_UNITS) + window_header(meta["window"], meta["snapshots"], {
+        "cell": f"{meta['cell']!r} m", "rate_scatter": repr(meta["rate_scatter"])})
     path = Path(dest) / COLLISIONS_FILE
     atomic_write_text(path, header + table.to_csv(index=False, float_format="%.9g"))
     return path
@@ -425,12 +426,9 @@ def write_collisions(run_folder, dest) -> Path:
 
 def read_collisions(path) -> tuple[pd.DataFrame, dict]:
     """The (table, meta) a :func:`write_collisions` file holds."""
-    lines = Path(path).read_text().splitlines()
-    head = next(line for line in lines[:3] if line.startswith("# window:"))
-    fields = dict(part.strip().split(": ", 1) for part in head[2:].split(";"))
-    window = tuple(float(x) for x in fields["window"].split()[:2])
-    meta = {"window": window, "cell": float(fields["cell"].split()[0]), "rate_scatter": float(fields["rate_scatter"]),
-            "snapshots": [float(x) for x in fields["snapshots"].split()]}
+    fields = read_window_header(path)
+    meta = {"window": fields["window"], "cell": float(fields["cell"].split()[0]),
+            "rate_scatter": float(fields["rate_scatter"]), "snapshots": fields["snapshots"]}
     return pd.read_csv(path, comment="#"), meta
 
 

@@ -248,3 +248,23 @@ def portable_path(source: str) -> str:
     if "data" in parts:
         return "/".join(parts[len(parts) - 1 - parts[::-1].index("data"):])
     return Path(source).name
+
+
+def window_header(window, snapshots, fields: dict[str, str]) -> str:
+    """The header line of a measure stored beside a run (collisions by height, the floor's lift, the floor layer):
+    ``# window: T0 T1 s; NAME: TEXT; ...; snapshots: T T ...`` with ``fields`` (name -> its text, units included)
+    in their order; read back by :func:`read_window_header`."""
+    middle = "".join(f"{name}: {text}; " for name, text in fields.items())
+    return (f"# window: {float(window[0])!r} {float(window[1])!r} s; {middle}snapshots: "
+            + " ".join(repr(float(t)) for t in snapshots) + "\n")
+
+
+def read_window_header(path) -> dict:
+    """The fields of a :func:`window_header` line in the first three lines of ``path``: "window" as (T0, T1) [s],
+    "snapshots" as a list of times [s], every other field as its text."""
+    lines = Path(path).read_text().splitlines()
+    head = next(line for line in lines[:3] if line.startswith("# window:"))
+    fields = dict(part.strip().split(": ", 1) for part in head[2:].split(";"))
+    fields["window"] = tuple(float(x) for x in fields["window"].split()[:2])
+    fields["snapshots"] = [float(x) for x in fields["snapshots"].split()]
+    return fields

@@ -31,6 +31,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .files import read_window_header, window_header
+
 #: Height of the profile's bins [m].
 BIN = 1e-3
 #: The profile's top above the floor [m] (at most 0.4 of the slag height).
@@ -142,9 +144,8 @@ def write_floor_layer(run_folder, dest, window: tuple[float, float] | None = Non
     from settler.output import atomic_write_text, units_line
 
     table, meta = measure_floor_layer(run_folder, window)
-    header = (units_line(FLOOR_LAYER_UNITS)
-              + f"# window: {meta['window'][0]!r} {meta['window'][1]!r} s; thickness: {meta['thickness']!r} m; "
-              "snapshots: " + " ".join(repr(float(t)) for t in meta["snapshots"]) + "\n")
+    header = units_line(FLOOR_LAYER_UNITS) + window_header(meta["window"], meta["snapshots"],
+                                                           {"thickness": f"{meta['thickness']!r} m"})
     path = Path(dest) / FLOOR_LAYER_FILE
     atomic_write_text(path, header + table.to_csv(index=False, float_format="%.7g"))
     return path
@@ -152,12 +153,9 @@ def write_floor_layer(run_folder, dest, window: tuple[float, float] | None = Non
 
 def read_floor_layer(path) -> tuple[pd.DataFrame, dict]:
     """The (table, meta) a :func:`write_floor_layer` file holds (meta: window, thickness, snapshots)."""
-    lines = Path(path).read_text().splitlines()
-    head = next(line for line in lines[:3] if line.startswith("# window:"))
-    fields = dict(part.strip().split(": ", 1) for part in head[2:].split(";"))
-    meta = {"window": tuple(float(x) for x in fields["window"].split()[:2]),
-            "thickness": float(fields["thickness"].split()[0]),
-            "snapshots": [float(x) for x in fields["snapshots"].split()]}
+    fields = read_window_header(path)
+    meta = {"window": fields["window"], "thickness": float(fields["thickness"].split()[0]),
+            "snapshots": fields["snapshots"]}
     return pd.read_csv(path, comment="#"), meta
 
 

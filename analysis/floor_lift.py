@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .files import read_window_header, window_header
+
 #: The floor band: the bottom tenth of the slag height [-] (the zone diagnostics' bottom band).
 FLOOR_BAND = 0.1
 #: Size-bin edges [m] of the table (the last bin open above).
@@ -186,11 +188,9 @@ def write_floor_lift(run_folder, dest, window: tuple[float, float] | None = None
 
     table, meta = measure_floor_lift(run_folder, window)
     se = meta["standard_errors"]
-    header = (units_line(FLOOR_LIFT_UNITS)
-              + f"# window: {meta['window'][0]!r} {meta['window'][1]!r} s; share: {meta['share']!r} +- {se[0]!r}; "
-              f"lift_velocity: {meta['lift_velocity']!r} +- {se[1]!r} m/s; upflow: {meta['upflow']!r} m/s; "
-              f"velocity_ratio: {meta['velocity_ratio']!r}; snapshots: "
-              + " ".join(repr(t) for t in meta["snapshots"]) + "\n")
+    header = units_line(FLOOR_LIFT_UNITS) + window_header(meta["window"], meta["snapshots"], {
+        "share": f"{meta['share']!r} +- {se[0]!r}", "lift_velocity": f"{meta['lift_velocity']!r} +- {se[1]!r} m/s",
+        "upflow": f"{meta['upflow']!r} m/s", "velocity_ratio": repr(meta["velocity_ratio"])})
     path = Path(dest) / FLOOR_LIFT_FILE
     atomic_write_text(path, header + table.to_csv(index=False, float_format="%.9g"))
     return path
@@ -199,9 +199,7 @@ def write_floor_lift(run_folder, dest, window: tuple[float, float] | None = None
 def read_floor_lift(path) -> tuple[pd.DataFrame, dict]:
     """The (table, meta) a :func:`write_floor_lift` file holds (meta: window, share, lift_velocity, their standard
     errors, upflow, velocity_ratio, snapshots)."""
-    lines = Path(path).read_text().splitlines()
-    head = next(line for line in lines[:3] if line.startswith("# window:"))
-    fields = dict(part.strip().split(": ", 1) for part in head[2:].split(";"))
+    fields = read_window_header(path)
 
     def value_error(text):
         parts = text.replace(" m/s", "").split(" +- ")
@@ -209,10 +207,9 @@ def read_floor_lift(path) -> tuple[pd.DataFrame, dict]:
 
     share, share_se = value_error(fields["share"])
     lift, lift_se = value_error(fields["lift_velocity"])
-    meta = {"window": tuple(float(x) for x in fields["window"].split()[:2]), "share": share, "lift_velocity": lift,
+    meta = {"window": fields["window"], "share": share, "lift_velocity": lift,
             "standard_errors": (share_se, lift_se), "upflow": float(fields["upflow"].split()[0]),
-            "velocity_ratio": float(fields["velocity_ratio"]),
-            "snapshots": [float(x) for x in fields["snapshots"].split()]}
+            "velocity_ratio": float(fields["velocity_ratio"]), "snapshots": fields["snapshots"]}
     return pd.read_csv(path, comment="#"), meta
 
 

@@ -313,6 +313,22 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
     return {"coefficient": coefficient, "thickness": float(np.mean(thickness)), "per_run": per_run, "runs": list(runs)}
 
 
+def _collisions_with_shear(folder: Path, needs: str):
+    """(table, meta) of a stored run's collisions by height (:func:`analysis.band_efficiency.read_collisions`) with
+    its well-mixed shear columns; FileNotFoundError naming the file and what ``needs`` it where either is missing."""
+    from analysis.band_efficiency import COLLISIONS_FILE, read_collisions
+
+    path = folder / COLLISIONS_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{folder}: no {COLLISIONS_FILE} (stored runs measure it when made with "
+                                f"merges_by_height.csv, a04ea13 or later); {needs} needs it")
+    table, meta = read_collisions(path)
+    if "mixed_shear_under_inlet" not in table:
+        raise FileNotFoundError(f"{path}: no well-mixed shear collisions (stored before 2026-12-05); store the "
+                                "run again from its run folder (python -m analysis.reference_set)")
+    return table, meta
+
+
 def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: float | None = None) -> dict:
     """The roof layer's own kernel [-] as popbal's roof applies it, from each full run's zone diagnostics over the
     window of its collisions by height (``collisions_by_height.csv``, measured over the steady window when the run
@@ -335,7 +351,7 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
     Each the geometric mean over the runs; per run in "per_run". A run without the table, without the well-mixed
     shear columns, without merges or shear in its top band, or whose roof the slag alone would carry is refused by
     name, and so is an empty list of runs."""
-    from analysis.band_efficiency import COLLISIONS_FILE, read_collisions
+    from analysis.band_efficiency import COLLISIONS_FILE
     from popbal.model import roof_slag_velocity
     from settler.cases import load_case
 
@@ -346,13 +362,7 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
     for run in runs:
         folder = Path(reference_dir) / run
         path = folder / COLLISIONS_FILE
-        if not path.is_file():
-            raise FileNotFoundError(f"{folder}: no {COLLISIONS_FILE} (stored runs measure it when made with "
-                                    "merges_by_height.csv, a04ea13 or later); the roof kernel needs it")
-        table, meta = read_collisions(path)
-        if "mixed_shear_under_inlet" not in table:
-            raise FileNotFoundError(f"{path}: no well-mixed shear collisions (stored before 2026-12-05); store the "
-                                    "run again from its run folder (python -m analysis.reference_set)")
+        table, meta = _collisions_with_shear(folder, "the roof kernel")
         top = table.iloc[int(np.argmax(table["z"].to_numpy()))]
         if not math.isfinite(top["mixed_shear_under_inlet"]) or not math.isfinite(top["shear_rate_under_inlet"]):
             raise ValueError(f"{path}: no slag shear rate in the top band under the inlet (measured without the whole "
@@ -407,7 +417,7 @@ def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict
     E_ch and the shear coefficient as geometric means over the runs; per run in "per_run". A run without the table,
     its well-mixed shear columns or merges between the top and bottom bands is refused by name, as is an empty list
     of runs."""
-    from analysis.band_efficiency import COLLISIONS_FILE, read_collisions
+    from analysis.band_efficiency import COLLISIONS_FILE
     from fulldem.boundaries import Inlet
     from popbal.model import channel_closure
     from settler.cases import NO_CALIBRATION, load_case
@@ -418,13 +428,7 @@ def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict
     for run in runs:
         folder = Path(reference_dir) / run
         path = folder / COLLISIONS_FILE
-        if not path.is_file():
-            raise FileNotFoundError(f"{folder}: no {COLLISIONS_FILE} (stored runs measure it when made with "
-                                    "merges_by_height.csv, a04ea13 or later); the channel kernel needs it")
-        table, _ = read_collisions(path)
-        if "mixed_shear_under_inlet" not in table:
-            raise FileNotFoundError(f"{path}: no well-mixed shear collisions (stored before 2026-12-05); store the "
-                                    "run again from its run folder (python -m analysis.reference_set)")
+        table, _ = _collisions_with_shear(folder, "the channel kernel")
         below = table.sort_values("z").iloc[1:-1]
         merges = float(below["merges_under_inlet"].sum())
         mixed = float(below["mixed_under_inlet"].sum())
