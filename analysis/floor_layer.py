@@ -159,6 +159,53 @@ def read_floor_layer(path) -> tuple[pd.DataFrame, dict]:
     return pd.read_csv(path, comment="#"), meta
 
 
+def bottom_factor(runs, reference_dir, values: dict | None = None) -> dict:
+    """popbal's bottom layer factor f_b = delta_b / R_c [-] measured in stored runs, not fitted: per run the floor
+    layer's thickness by volume delta_b [m] (:data:`FLOOR_LAYER_FILE` beside the run, its steady window) over popbal's
+    channel radius R_c [m] at the [popbal] ``values`` (dotted keys on the run's own case.toml, its calibration layer
+    set aside; :func:`popbal.model.channel_closure`), as popbal makes the layer h_b = f_b R_c thick. f_b is the
+    geometric mean over the runs; "standard_error" the log values' standard deviation over sqrt(n), times f_b (NaN
+    for one run); "spread" exp of that standard deviation, the factor one run lies off the mean; "per_run" {run:
+    {"thickness", "channel_radius", "factor"}}; "no_layer" the runs whose floor holds no layer (thickness NaN: too
+    few droplets there, or no excess over the far value, as in the deep family, whose large droplets settle as they
+    arrive), left out of the mean: their layer is not thin but absent, which f_b R_c cannot say. For coalescing runs
+    only: a floor without coalescence fills (docs/guide/reduced-model.md), which is not the layer h_b stands for.
+    ValueError naming the run whose file is missing, or when no run has a layer."""
+    from popbal.model import channel_closure
+    from settler.cases import NO_CALIBRATION, load_case
+
+    if not runs:
+        raise ValueError("the bottom layer factor needs at least one stored run with its floor layer; none was given")
+    per_run, no_layer = {}, []
+    for run in runs:
+        folder = Path(reference_dir) / run
+        path = folder / FLOOR_LAYER_FILE
+        if not path.is_file():
+            raise ValueError(f"{path}: missing (python -m analysis.reference_set writes it beside every stored run, "
+                             "python -m analysis.floor_layer measures a run folder)")
+        thickness = read_floor_layer(path)[1]["thickness"]
+        if math.isnan(thickness):
+            no_layer.append(run)
+            continue
+        if not thickness > 0.0:
+            raise ValueError(f"{path}: floor layer thickness {thickness!r} m; allowed: a positive thickness or NaN "
+                             "(no layer)")
+        case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION, **(values or {})})
+        radius = channel_closure(case)[0]
+        if not radius > 0.0:
+            raise ValueError(f"{run}: popbal's channel radius is {radius!r} m at the values given; allowed: a channel "
+                             "(popbal.channel_radius_factor > 0)")
+        per_run[run] = {"thickness": thickness, "channel_radius": radius, "factor": thickness / radius}
+    if not per_run:
+        raise ValueError(f"no floor layer in {', '.join(runs)} (floor_layer.csv thickness NaN in each): the bottom "
+                         "layer factor needs at least one run with a layer")
+    logs = np.log([v["factor"] for v in per_run.values()])
+    sd = float(np.std(logs, ddof=1)) if len(logs) > 1 else math.nan
+    value = float(np.exp(logs.mean()))
+    return {"value": value, "standard_error": value * sd / math.sqrt(len(logs)), "spread": math.exp(sd),
+            "per_run": per_run, "no_layer": no_layer, "runs": list(per_run)}
+
+
 def main(argv=None) -> int:
     import argparse
     import sys

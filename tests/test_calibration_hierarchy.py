@@ -478,7 +478,7 @@ def test_cell_efficiency_is_the_kernel_runs_merges_over_its_cell_by_cell_collisi
     assert got["efficiency"] == pytest.approx(100.0 / 125.0, rel=1e-12)
     assert got["standard_error"] == pytest.approx(0.8 * math.sqrt(1.0 / 100.0 + 0.05**2), rel=1e-12)
     assert got["merges"] == 100 and got["expected_collisions"] == 125.0 and got["form"] == "cell"
-    assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution"]
+    assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution", "zones_floor"]
 
 
 def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
@@ -659,3 +659,69 @@ def test_channel_kernel_from_the_collisions_by_height_of_a_run(tmp_path):
     (folder / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
     with pytest.raises(ValueError, match="a/collisions_by_height.csv: no merges"):
         channel_kernel_from_collisions(["a"], tmp_path, values)
+
+
+def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_the_coalescing_whole_runs(tmp_path,
+                                                                                                      monkeypatch):
+    """'zones_floor': the coalescence-off transport runs' floors fill, so level 2 fits the channel coefficient alone
+    with no bottom layer, and level 3 holds f_b = the geometric mean of delta_b / R_c over its coalescing runs only
+    (a coalescence-off run in the whole level is left out), at level 2's channel coefficient; the layer writes it.
+    The measured-zone steps and the fits are stubbed (tested above); this is the order and the choice of runs."""
+    import tomllib
+    from pathlib import Path
+
+    import analysis.calibration.hierarchy as h
+    from analysis.calibration.fit import LevelFit
+    from analysis.calibration.layer import write_layer
+    from analysis.calibration.registry import Registry
+    from popbal.model import channel_closure
+    from settler.cases import NO_CALIBRATION, load_case
+    from tests.test_floor_layer import _stored_layer
+
+    reference = Path(__file__).parents[1] / "data/reference_remake"
+    for run, source, thickness in (("a", "demo_cell_25", 4e-3), ("b", "demo_feed_half_fine", 3e-3),
+                                   ("off", "demo_no_coalescence_fine", 1e-3), ("kernel", "demo_cell_25", 1e-3)):
+        _stored_layer(tmp_path / run, thickness, reference / source / "case.toml")
+        (tmp_path / run / "timeseries.csv").write_text("time\n0\n")
+    registry = Registry(holdouts=(), why={}, families={}, path=tmp_path / "holdouts.toml",
+                        levels={"collision": ("kernel",), "transport": ("off",), "whole": ("a", "b", "off")})
+    fixed_at = {}
+
+    def fit_level(level, targets, case_files, parameters, start, fixed, **kw):
+        fixed_at[level] = dict(fixed)
+        names = list(parameters)
+        return LevelFit(level=level, runs=list(case_files), parameters=names, estimates={n: 0.5 for n in names},
+                        standard_errors={n: 0.05 for n in names}, correlation=np.eye(len(names)), discrepancy=0.0,
+                        chi2=1.0, residual_count=10, evaluations=3, status="converged", errors={},
+                        gate={"passed": True, "reasons": []})
+
+    monkeypatch.setattr(h, "cell_efficiency", lambda folder: {"efficiency": 0.8, "standard_error": 0.06, "merges": 9,
+                                                              "quadrature_error": 0.0, "expected_collisions": 11.0,
+                                                              "form": "cell"})
+    monkeypatch.setattr(h, "seed_scatter", lambda reference_dir: {})
+    monkeypatch.setattr(h, "dilution_from_zones", lambda runs, d: {"value": 4.94, "core_fraction": 0.041,
+                                                                   "reynolds": 2.46, "runs": list(runs),
+                                                                   "standard_errors": {"plume_dilution_reynolds": 0.5,
+                                                                                       "channel_radius_factor": 0.2},
+                                                                   "correlation": 0.5, "rms": 0.1,
+                                                                   "per_run": {}, "excluded": {}})
+    monkeypatch.setattr(h, "roof_from_zones", lambda runs, d: {"coefficient": 0.05, "thickness": 0.006,
+                                                               "per_run": {}, "runs": list(runs)})
+    monkeypatch.setattr(h, "roof_kernel_from_collisions", lambda runs, d, thickness: {
+        "efficiency": 1.9, "shear_coefficient": 3.0, "per_run": {}, "runs": list(runs)})
+    monkeypatch.setattr(h, "load_target", lambda run, d, seed: run)
+    monkeypatch.setattr(h, "fit_level", fit_level)
+    result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures="zones_floor")
+    assert [f.parameters for f in result.levels] == [["channel_coefficient"], ["shear_coefficient"]]
+    assert "popbal.bottom_layer_factor" not in fixed_at["transport"]
+    assert result.floor["runs"] == ["a", "b"]
+    radius = {r: channel_closure(load_case(tmp_path / r / "case.toml", {"case.calibration": NO_CALIBRATION,
+                                                                        **fixed_at["transport"],
+                                                                        "popbal.channel_coefficient": 0.5}))[0]
+              for r in "ab"}
+    expected = math.sqrt(4e-3 / radius["a"] * 3e-3 / radius["b"])
+    assert fixed_at["whole"]["popbal.bottom_layer_factor"] == pytest.approx(expected, rel=1e-12)
+    assert fixed_at["whole"]["popbal.channel_coefficient"] == 0.5
+    layer = tomllib.loads(write_layer(result, tmp_path / "floor.toml", tmp_path / "holdouts.toml", "x").read_text())
+    assert layer["popbal"]["bottom_layer_factor"] == pytest.approx(expected, rel=1e-12)
+    assert "bottom layer from the floor layers: f_b" in result.summary()

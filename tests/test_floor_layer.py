@@ -2,6 +2,7 @@
 profile (the measure behind popbal's bottom layer thickness), against the closed form of an exponential layer."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -95,3 +96,48 @@ def test_a_run_folders_floor_layer_is_measured_stored_and_read_back(tmp_path):
     again, read = read_floor_layer(path)
     assert again["thickness"].to_numpy() == pytest.approx(table["thickness"].to_numpy(), nan_ok=True, rel=1e-6)
     assert read["window"] == (20.0, 22.0) and read["thickness"] == pytest.approx(meta["thickness"], rel=1e-6)
+
+
+DEMO_CASE = Path(__file__).parents[1] / "data/reference_remake/demo_cell_25/case.toml"
+
+
+def _stored_layer(folder, thickness, case_file=DEMO_CASE):
+    """A stored run stand-in: the demo's case.toml and a floor_layer.csv whose header holds ``thickness`` [m]."""
+    from analysis.files import window_header
+    from analysis.floor_layer import FLOOR_LAYER_FILE, FLOOR_LAYER_UNITS
+    from settler.output import units_line
+
+    folder.mkdir()
+    (folder / "case.toml").write_text(Path(case_file).read_text())
+    table = pd.DataFrame({column: [1.0] for column in FLOOR_LAYER_UNITS})
+    header = units_line(FLOOR_LAYER_UNITS) + window_header((45.0, 60.0), [60.0], {"thickness": f"{thickness!r} m"})
+    (folder / FLOOR_LAYER_FILE).write_text(header + table.to_csv(index=False))
+
+
+def test_bottom_factor_is_the_geometric_mean_of_the_floor_layers_over_the_channel_radius(tmp_path):
+    """popbal's bottom layer factor measured: delta_b / R_c per run. With the inlet form R_c = k x the inlet radius
+    (k = 0.5, the demo's 37.5 mm: 18.75 mm), layers of 3.75 and 7.5 mm give factors 0.2 and 0.4, their geometric
+    mean sqrt(0.08), log standard deviation ln 2 / sqrt 2 (spread x1.63), standard error mean x that / sqrt 2; a run
+    with no layer (NaN) is named and left out."""
+    from analysis.floor_layer import FLOOR_LAYER_FILE, bottom_factor
+
+    _stored_layer(tmp_path / "a", 3.75e-3)
+    _stored_layer(tmp_path / "b", 7.5e-3)
+    values = {"popbal.channel_radius_form": "inlet", "popbal.channel_radius_factor": 0.5}
+    got = bottom_factor(["a", "b"], tmp_path, values)
+    sd = math.log(2.0) / math.sqrt(2.0)
+    assert got["per_run"]["a"]["channel_radius"] == pytest.approx(0.01875, rel=1e-12)
+    assert [got["per_run"][r]["factor"] for r in "ab"] == pytest.approx([0.2, 0.4], rel=1e-12)
+    assert got["value"] == pytest.approx(math.sqrt(0.08), rel=1e-12)
+    assert got["spread"] == pytest.approx(math.exp(sd), rel=1e-12)
+    assert got["standard_error"] == pytest.approx(math.sqrt(0.08) * sd / math.sqrt(2.0), rel=1e-12)
+    with pytest.raises(ValueError, match="none was given"):
+        bottom_factor([], tmp_path, values)
+    _stored_layer(tmp_path / "c", float("nan"))  # a floor without a layer (the deep family's) is left out, named
+    without = bottom_factor(["a", "c", "b"], tmp_path, values)
+    assert without["value"] == got["value"] and without["no_layer"] == ["c"] and without["runs"] == ["a", "b"]
+    with pytest.raises(ValueError, match="no floor layer in c"):
+        bottom_factor(["c"], tmp_path, values)
+    (tmp_path / "c" / FLOOR_LAYER_FILE).unlink()
+    with pytest.raises(ValueError, match=r"c/floor_layer.csv: missing"):
+        bottom_factor(["c"], tmp_path, values)

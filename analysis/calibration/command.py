@@ -37,7 +37,7 @@ def run_set(args) -> int:
     text = result.summary()
     print(text)
     if out is not None:
-        data = {"closures": result.closures, "roof": result.roof, "leave_out": leave_out,
+        data = {"closures": result.closures, "roof": result.roof, "floor": result.floor, "leave_out": leave_out,
                 "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values,
                 "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,

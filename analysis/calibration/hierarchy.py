@@ -59,13 +59,22 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers_busy": {"levels": LAYER_LEVELS, "layers": True, "switches": BUSY},
             "zones": {"levels": LAYER_LEVELS, "layers": True, "switches": CONFINED, "roof_kernel": True},
             "zones_dilution": {"levels": LAYER_LEVELS, "layers": True, "switches": CONFINED, "roof_kernel": True,
-                               "dilution": True, "cell_efficiency": True}}
+                               "dilution": True, "cell_efficiency": True},
+            "zones_floor": {"levels": {"transport": ("channel_coefficient",), "whole": ("shear_coefficient",)},
+                            "layers": True, "switches": CONFINED, "roof_kernel": True, "dilution": True,
+                            "cell_efficiency": True, "floor": True}}
 #: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
 #: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
 #: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
 #: transport runs alone; and the collision level's efficiency taken cell by cell (:func:`cell_efficiency`), the
 #: coalescence rule's own, where the other sets take it over horizontal slices of the whole box, which folds in
 #: how much denser the droplets are under the inlet than elsewhere: a contrast popbal's zones hold themselves.
+#: 'zones_floor' (added 2026-12-06, before any fit to the whole remade set) is 'zones_dilution' with the bottom layer's
+#: factor measured, not fitted: the coalescence-off transport runs' floors fill (a bed growing by the feed's
+#: settling share, docs/guide/reduced-model.md), not the 2-12 mm layer of the coalescing runs that popbal's bottom
+#: layer stands for, so the transport level fits the plume alone with no bottom layer, and the whole level takes
+#: f_b = delta_b / R_c from its coalescing runs' floor layers (:func:`analysis.floor_layer.bottom_factor`) at the
+#: transport level's values.
 #: What each switch of a closure set stands for (the layer's comment on it).
 SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time merging, not fitted",
                 "popbal.confinement": "the confined plume's coefficient and return flow (popbal.closures), not fitted"}
@@ -99,6 +108,7 @@ class Hierarchy:
     coverage: dict | None = None  # the hold-outs' window means inside their 90 % bands (bands.coverage)
     closures: str = "designed"  # the CLOSURES entry fitted
     roof: dict | None = None  # the roof law from the zone diagnostics (roof_from_zones), with 'layers'
+    floor: dict | None = None  # f_b from the floor layers (floor_layer.bottom_factor), with 'zones_floor'
 
     def summary(self) -> str:
         c = self.collision
@@ -116,6 +126,12 @@ class Hierarchy:
                              f"coefficient {k['shear_coefficient']:.3g} (per run "
                              + ", ".join(f"{r} {v['efficiency']:.3g} / {v['shear_coefficient']:.3g}"
                                          for r, v in k["per_run"].items()) + ")")
+        if self.floor:
+            lines.append(f"bottom layer from the floor layers: f_b = {self.floor['value']:.3g} +- "
+                         f"{self.floor['standard_error']:.2g} (spread x{self.floor['spread']:.2f}; per run "
+                         + ", ".join(f"{r} {v['thickness'] * 1e3:.2g} mm / {v['channel_radius'] * 1e3:.3g} mm"
+                                     for r, v in self.floor["per_run"].items()) + ")"
+                         + (f"; no layer in {', '.join(self.floor['no_layer'])}" if self.floor["no_layer"] else ""))
         for fit in self.levels:
             lines.append(f"level {fit.level}: runs {', '.join(fit.runs)}; chi2 {fit.chi2:.3g} for {fit.residual_count} "
                          f"residuals, discrepancy {fit.discrepancy:.3g}, {fit.evaluations} model runs ({fit.status})")
@@ -508,13 +524,19 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
         roof["kernel"] = roof_kernel_from_collisions(whole_runs, reference_dir, thickness=roof["thickness"])
         fixed.update({"popbal.roof_collision_efficiency": roof["kernel"]["efficiency"],
                       "popbal.roof_shear_coefficient": roof["kernel"]["shear_coefficient"]})
-    levels = []
+    levels, floor = [], None
     for level in ("transport", "whole"):
         if level == "transport":
             runs = transport_runs
         else:
             runs, missing[level] = _stored(registry.levels.get(level, ()), reference_dir)
         refuse_holdouts(runs, registry, f"level {level}")
+        if level == "whole" and CLOSURES[closures].get("floor"):  # the coalescing whole runs' floors, level 2 held
+            from analysis.floor_layer import bottom_factor
+
+            floor = bottom_factor([r for r in runs if load_case(Path(reference_dir) / r / "case.toml")
+                                   .coalescence.enabled], reference_dir, fixed)
+            fixed["popbal.bottom_layer_factor"] = floor["value"]
         targets = [load_target(r, reference_dir, seed) for r in runs]
         case_files = {r: Path(reference_dir) / r / "case.toml" for r in runs}
         parameters = CLOSURES[closures]["levels"][level]
@@ -533,7 +555,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
                      missing={k: v for k, v in missing.items() if v}, coverage=coverage_result, closures=closures,
-                     roof=roof)
+                     roof=roof, floor=floor)
 
 
 def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, samples):

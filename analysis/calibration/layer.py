@@ -83,6 +83,12 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
                       f"roof_shear_coefficient = {k['shear_coefficient']!r}  # - [derived] the geometric mean of "
                       f"the shear rate there times roof_thickness over the layer's drainage velocity, in "
                       f"{', '.join(k['runs'])}"]
+    if result.floor:
+        f = result.floor
+        lines.append(f"bottom_layer_factor = {f['value']!r}  # - [derived] the geometric mean of the floor layer's "
+                     f"thickness over popbal's channel radius in {', '.join(f['runs'])} (floor_layer.csv), standard "
+                     f"error {f['standard_error']:.3g}, spread x{f['spread']:.3g}"
+                     + (f"; no layer in {', '.join(f['no_layer'])}" if f["no_layer"] else ""))
     for fit in result.levels:
         for name in fit.parameters:
             lines.append(f"{name} = {fit.estimates[name]!r}  # - [derived] level {fit.level}: fit to "
