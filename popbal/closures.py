@@ -124,6 +124,15 @@ discrepancy 0.19 against 0.21 with constants): the full engine's return flow is 
 size, its plume about sqrt(0.41) = 0.64 times as fast, and the two runs' errors (count +12 / -31 %, settling flux
 -29 / +4 %, axis velocity -21 / +5 %) are those of the constant closures, so the law does not yet explain why the
 deep family's plume is slower; the full runs' plume radius there is about one 5 mm cell (data/reference/README.md).
+Plume as a line force (``plume_law = 'line_force'``, added 2026-12-06; docs/guide/reduced-model.md, "the axis
+velocity as a confined line force"). The full runs' plume is no uniform core: within the half-volume radius a it holds
+half its band's droplets and the rest spreads out. Their axis velocity is, within about 20 % wherever the plume is one
+compact channel (demo_feed_half_fine, demo_visc_double_fine, demo_cell_25 and the deep family; not where the droplets
+spread over the box), the line force of that half load lambda_c: w0 = lambda_c drho g A0(R/a) / (4 pi mu), no
+constant fitted. popbal's channel, of radius R_c (the dilution law, fitted to the full runs' core fraction within a),
+holds the load the feed brings at the channel's speed, so the law takes c(R/R_c) = A0 / 4
+(:func:`line_force_coefficient`) in place of the uniform core's A0^2 / (4 Am), in u_s and in the cloud law alike:
+at R/R_c = 2.6 / 5 / 10, 0.27 / 0.57 / 0.90 against 0.40 / 0.71 / 1.05. The return flow keeps the uniform core's S.
 Those figures were measured before 2026-12-05, when the channel's cloud law still had c_ch alone: the droplets and
 the reported axis velocity ran at the unconfined sqrt(c_ch Q drho g / (pi mu)) while u_s, the return flow and Re
 took c(R/R_c) (1.55 u_s at R/R_c = 2.6); the cloud law now has c_ch c(R/R_c) t^2 and carries the confined u_s
@@ -432,6 +441,17 @@ def confined_plume_coefficient(column_to_core):
     return a0 * a0 / (4.0 * am)
 
 
+def line_force_coefficient(column_to_core):
+    """c(R/a) = A0 / 4 [-] of the plume as a line force (``plume_law = 'line_force'``, module docstring): the axis
+    velocity w0 = lambda drho g A0 / (4 pi mu) of the load lambda [m^3/m] the channel holds, which at lambda = Q / w0
+    gives w0 = sqrt(c Q drho g / (pi mu)); NaN for R/a <= 1."""
+    return 0.25 * confined_axis_coefficient(column_to_core)
+
+
+#: The confined plume's coefficient c(R / R_c) by ``popbal.plume_law`` (module docstring; absent: 'uniform_core').
+PLUME_LAWS = {"uniform_core": confined_plume_coefficient, "line_force": line_force_coefficient}
+
+
 def confined_return_radius(column_to_core):
     """r_0 / R [-]: where the confined Stokes plume's slag turns from down to up (x = a / R). Outside the core it
     is the root in (x, 1) of h(y) = (2 - x^2)(y^2 - 1) / 2 - ln y; when the slag already rises at the core's edge
@@ -470,10 +490,10 @@ def confined_return_share(column_to_core):
 
 
 def confined_closure(volume_flux, excess_density, viscosity, multiplier, column_radius, radius_of, iterations=200,
-                     tolerance=1e-12, gravity=STANDARD_GRAVITY):
+                     tolerance=1e-12, gravity=STANDARD_GRAVITY, law=confined_plume_coefficient):
     """(u_s [m/s], R_c [m]) with u_s = sqrt(multiplier c(R/R_c) Q drho g / (pi mu)) and R_c = radius_of(u_s), R the
-    column radius [m], by fixed-point iteration from c = 1; ValueError if the channel reaches the column wall
-    (R_c >= R) or the iteration does not settle."""
+    column radius [m], c = ``law`` (:data:`PLUME_LAWS`), by fixed-point iteration from c = 1; ValueError if the
+    channel reaches the column wall (R_c >= R) or the iteration does not settle."""
     coefficient = 1.0
     for _ in range(iterations):
         velocity = steady_channel_velocity(volume_flux, excess_density, viscosity, multiplier * coefficient, gravity)
@@ -481,7 +501,7 @@ def confined_closure(volume_flux, excess_density, viscosity, multiplier, column_
         if not radius < column_radius:
             raise ValueError(f"the channel (radius {radius:.4g} m) reaches the column's equivalent radius "
                              f"{column_radius:.4g} m, where the confined plume has no return flow")
-        updated = confined_plume_coefficient(column_radius / radius) if radius > 0.0 else coefficient
+        updated = law(column_radius / radius) if radius > 0.0 else coefficient
         if abs(updated - coefficient) <= tolerance * coefficient:
             return velocity, radius
         coefficient = updated

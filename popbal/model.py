@@ -185,7 +185,7 @@ def build(case: Case) -> Model:
     z = (np.arange(cells) + 0.5) * dz
     # the droplets' cloud law in the plume carries them at transport x u_s (steady), so its coefficient is c_ch x t^2,
     # times the confined plume's c(R / R_c) under popbal.confinement, which u_s holds (channel_closure)
-    confined = closures.confined_plume_coefficient(column_radius(case) / channel_radius) \
+    confined = closures.PLUME_LAWS[p.plume_law or "uniform_core"](column_radius(case) / channel_radius) \
         if p.confinement and plume_velocity > 0.0 and channel_radius > 0.0 else 1.0
     plume_coefficient = p.channel_coefficient * confined * transport**2
     cloud_coefficient, cloud_radius = closures.cloud_profile(z, g.height, channel_radius, plume_coefficient,
@@ -448,6 +448,9 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
     p, g = case.popbal, case.geometry
     volume_flux = case.feed.mass_rate * p.channel_feed_fraction / case.matte.density
     excess = case.matte.density - case.slag.density
+    if p.plume_law and not p.confinement:
+        raise CaseError(f"popbal.plume_law = {p.plume_law!r}: the law of the confined plume's coefficient; allowed "
+                        "only with popbal.confinement = true (or leave it out)")
 
     def radius_of(velocity):
         if p.channel_radius_form == "flux" and p.plume_dilution_reynolds:  # no wider than the inlet that feeds it
@@ -461,7 +464,8 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
     if p.confinement and volume_flux > 0.0 and excess > 0.0 and p.channel_radius_factor > 0.0:
         try:
             velocity, radius = closures.confined_closure(volume_flux, excess, case.slag_viscosity,
-                                                         p.channel_coefficient, column_radius(case), radius_of)
+                                                         p.channel_coefficient, column_radius(case), radius_of,
+                                                         law=closures.PLUME_LAWS[p.plume_law or "uniform_core"])
         except ValueError as exc:
             raise CaseError(f"popbal.confinement = true: {exc}; allowed: a channel narrower than the box (a smaller "
                             "popbal.channel_radius_factor), or confinement = false") from None

@@ -348,6 +348,11 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                     "u_up = r S(R/R_c) u_s, so channel_coefficient and return_flow_ratio become "
                                     "multipliers of the laws (1: as derived; popbal.closures); absent or false: "
                                     "constants.", optional=True),
+        "plume_law": Field(S, "", "With confinement = true, the confined plume's coefficient c(R/R_c): "
+                                  "'uniform_core' (a core of radius R_c at uniform load, c = A0^2 / (4 Am)) or "
+                                  "'line_force' (the load as a line force on the axis, c = A0 / 4, as the full runs' "
+                                  "compact plumes measure it; popbal.closures); absent: 'uniform_core'.",
+                           choices=("uniform_core", "line_force"), optional=True),
         "busy_partners": Field(B, "", "true: a droplet merges with one partner at a time, as in the full engine's "
                                       "delayed coalescence, where a marked pair is busy for its growth time t_jk = "
                                       "max(growth_target d_m - d_small, 0) / (growth_rate d_m) (coalescence keys): "

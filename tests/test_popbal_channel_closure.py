@@ -84,22 +84,26 @@ def test_case_closure_by_hand():
     assert channel_closure(inlet)[0] == pytest.approx(0.5 * 0.075, rel=1e-12)
 
 
-@pytest.mark.parametrize("reynolds_scale, confined", [(None, False), (7.77, False), (None, True)])
+@pytest.mark.parametrize("reynolds_scale, confined", [(None, False), (7.77, False), (None, True),
+                                                     (None, "line_force")])
 def test_steady_axis_velocity_is_the_plume_velocity(reynolds_scale, confined):
     """Coalescence off, 'flux' form: the channel_velocity output at mid-height over 8-12 s is u_s within 5 %, with
     the droplets carried at u_s (Re_c absent) or at u_s / (1 + Re / Re_c) = u_s / 2 (Re_c = Re = 7.77: then the
     plume holds twice the matte and the output still reports the slag's u_s). Confined (the demo with a channel of
     R / R_c = 2.64, where c(R / R_c) = 0.41): the droplets' cloud law must carry the confined u_s too, not the
-    unconfined plume's sqrt(1 / 0.41) = 1.56 times faster one (what it did before the cloud law took c(R / R_c))."""
+    unconfined plume's sqrt(1 / 0.41) = 1.56 times faster one (what it did before the cloud law took c(R / R_c)).
+    With popbal.plume_law = 'line_force' the cloud law carries that law's u_s (c = A0 / 4) as well."""
     overrides = {"case.calibration": "none", "coalescence.enabled": False, "popbal.channel_radius_form": "flux",
                  "popbal.channel_coefficient": 0.37, "popbal.channel_radius_factor": 10.0 if confined else 5.0,
                  "popbal.end_time": 12.0, "popbal.output_interval": 0.5, "popbal.height_cells": 25,
-                 "popbal.sections_per_doubling": 1, "popbal.confinement": confined}
+                 "popbal.sections_per_doubling": 1, "popbal.confinement": bool(confined)}
+    if confined == "line_force":
+        overrides["popbal.plume_law"] = "line_force"
     if reynolds_scale is not None:
         overrides["popbal.plume_reynolds_scale"] = reynolds_scale
     case = load_case("demo" if confined else "simple", overrides)
     radius, u_s, _, transport = channel_closure(case)
-    if confined:
+    if confined is True:
         from popbal.model import column_radius
 
         assert closures.confined_plume_coefficient(column_radius(case) / radius) == pytest.approx(0.41, abs=0.01)

@@ -89,3 +89,27 @@ def test_a_channel_as_wide_as_the_column_is_refused():
     with pytest.raises(CaseError, match=r"popbal.confinement = true: the channel .* reaches the column"):
         popbal.setup(load_case("demo", {"case.calibration": "none", "popbal.channel_radius_form": "flux",
                                         "popbal.channel_radius_factor": 60.0, "popbal.confinement": True}))
+
+
+def test_the_line_force_law_solves_radius_and_velocity_together_and_needs_confinement():
+    """popbal.plume_law = 'line_force': u_s^2 = c_ch (A0(R/R_c) / 4) Q drho g / (pi mu), A0 = 2 ln(R/R_c) - 1 +
+    (R_c/R)^2 the confined line force's axis coefficient, with R_c = k_R sqrt(Q / (pi u_s)), to 1e-10; 'uniform_core'
+    is the law without the key, bit for bit; without confinement the key is refused by name."""
+    overrides = {"case.calibration": "none", "popbal.channel_radius_form": "flux", "popbal.channel_radius_factor": 4.0,
+                 "popbal.confinement": True, "popbal.channel_coefficient": 0.7, "popbal.height_cells": 10}
+    case = load_case("demo", {**overrides, "popbal.plume_law": "line_force"})
+    model = popbal.setup(case)
+    u, radius = model.parameters["plume_velocity"], model.channel_radius
+    q = case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
+    column = math.sqrt(case.geometry.width * case.geometry.depth / math.pi)
+    drho = case.matte.density - case.slag.density
+    a0 = 2.0 * math.log(column / radius) - 1.0 + (radius / column) ** 2
+    assert u**2 == pytest.approx(0.7 * a0 / 4.0 * q * drho * STANDARD_GRAVITY / (math.pi * case.slag_viscosity),
+                                 rel=1e-10)
+    assert radius == pytest.approx(4.0 * math.sqrt(q / (math.pi * u)), rel=1e-10)
+    default = popbal.setup(load_case("demo", overrides))
+    explicit = popbal.setup(load_case("demo", {**overrides, "popbal.plume_law": "uniform_core"}))
+    assert explicit.parameters["plume_velocity"] == default.parameters["plume_velocity"]
+    assert np.array_equal(explicit.cloud_coefficient, default.cloud_coefficient)
+    with pytest.raises(CaseError, match=r"popbal.plume_law = 'line_force': .* only with popbal.confinement = true"):
+        popbal.setup(load_case("demo", {**overrides, "popbal.confinement": False, "popbal.plume_law": "line_force"}))
