@@ -87,7 +87,7 @@ SINGULAR_RATIO_LIMIT = 1e-3
 
 #: The closure sets of ``--closures`` (analysis.calibration.hierarchy.CLOSURES, not imported here so that the command
 #: line starts without the calibration package; a test holds the two equal).
-CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy", "zones", "zones_dilution", "zones_floor")
+CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy", "zones", "zones_dilution", "zones_floor", "zones_line")
 
 
 class CalibrationError(ValueError):
@@ -593,7 +593,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "runs' roof) or 'zones_dilution' ('zones' with the plume's volume fraction diluted by "
                              "its Reynolds number, k_R and Re_d from the fitted runs' zone diagnostics) or 'zones_floor' "
                              "('zones_dilution' with the bottom layer's factor measured in the whole runs' floor "
-                             "layers, not fitted to the coalescence-off runs, whose floors fill); "
+                             "layers, not fitted to the coalescence-off runs, whose floors fill) or 'zones_line' "
+                             "('zones_floor' with popbal.plume_law = 'line_force'); "
                              "analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "

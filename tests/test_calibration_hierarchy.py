@@ -478,7 +478,8 @@ def test_cell_efficiency_is_the_kernel_runs_merges_over_its_cell_by_cell_collisi
     assert got["efficiency"] == pytest.approx(100.0 / 125.0, rel=1e-12)
     assert got["standard_error"] == pytest.approx(0.8 * math.sqrt(1.0 / 100.0 + 0.05**2), rel=1e-12)
     assert got["merges"] == 100 and got["expected_collisions"] == 125.0 and got["form"] == "cell"
-    assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution", "zones_floor"]
+    assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution", "zones_floor",
+                                                                                    "zones_line"]
 
 
 def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
@@ -661,12 +662,14 @@ def test_channel_kernel_from_the_collisions_by_height_of_a_run(tmp_path):
         channel_kernel_from_collisions(["a"], tmp_path, values)
 
 
-def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_the_coalescing_whole_runs(tmp_path,
-                                                                                                      monkeypatch):
+@pytest.mark.parametrize("closures", ["zones_floor", "zones_line"])
+def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_the_coalescing_whole_runs(
+        tmp_path, monkeypatch, closures):
     """'zones_floor': the coalescence-off transport runs' floors fill, so level 2 fits the channel coefficient alone
     with no bottom layer, and level 3 holds f_b = the geometric mean of delta_b / R_c over its coalescing runs only
     (a coalescence-off run in the whole level is left out), at level 2's channel coefficient; the layer writes it.
-    The measured-zone steps and the fits are stubbed (tested above); this is the order and the choice of runs."""
+    'zones_line' is the same with popbal.plume_law = 'line_force' in every level and in the layer. The measured-zone
+    steps and the fits are stubbed (tested above); this is the order and the choice of runs."""
     import tomllib
     from pathlib import Path
 
@@ -711,7 +714,9 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
         "efficiency": 1.9, "shear_coefficient": 3.0, "per_run": {}, "runs": list(runs)})
     monkeypatch.setattr(h, "load_target", lambda run, d, seed: run)
     monkeypatch.setattr(h, "fit_level", fit_level)
-    result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures="zones_floor")
+    result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures=closures)
+    law = "line_force" if closures == "zones_line" else None
+    assert fixed_at["transport"].get("popbal.plume_law") == law and fixed_at["whole"].get("popbal.plume_law") == law
     assert [f.parameters for f in result.levels] == [["channel_coefficient"], ["shear_coefficient"]]
     assert "popbal.bottom_layer_factor" not in fixed_at["transport"]
     assert result.floor["runs"] == ["a", "b"]
@@ -725,3 +730,4 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
     layer = tomllib.loads(write_layer(result, tmp_path / "floor.toml", tmp_path / "holdouts.toml", "x").read_text())
     assert layer["popbal"]["bottom_layer_factor"] == pytest.approx(expected, rel=1e-12)
     assert "bottom layer from the floor layers: f_b" in result.summary()
+    assert layer["popbal"].get("plume_law") == law and layer["popbal"]["confinement"] is True

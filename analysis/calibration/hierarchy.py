@@ -53,6 +53,7 @@ LAYER_LEVELS = {"transport": ("channel_coefficient", "bottom_layer_factor"), "wh
 #: time), where 'layers' gives the roof the channel's efficiency and shear coefficient.
 BUSY = {"popbal.busy_partners": True}
 CONFINED = {"popbal.confinement": True}
+LINE_FORCE = {"popbal.confinement": True, "popbal.plume_law": "line_force"}
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers": {"levels": LAYER_LEVELS, "layers": True},
             "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": BUSY},
@@ -62,7 +63,10 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
                                "dilution": True, "cell_efficiency": True},
             "zones_floor": {"levels": {"transport": ("channel_coefficient",), "whole": ("shear_coefficient",)},
                             "layers": True, "switches": CONFINED, "roof_kernel": True, "dilution": True,
-                            "cell_efficiency": True, "floor": True}}
+                            "cell_efficiency": True, "floor": True},
+            "zones_line": {"levels": {"transport": ("channel_coefficient",), "whole": ("shear_coefficient",)},
+                           "layers": True, "switches": LINE_FORCE, "roof_kernel": True, "dilution": True,
+                           "cell_efficiency": True, "floor": True}}
 #: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
 #: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
 #: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
@@ -74,10 +78,13 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
 #: settling share, docs/guide/reduced-model.md), not the 2-12 mm layer of the coalescing runs that popbal's bottom
 #: layer stands for, so the transport level fits the plume alone with no bottom layer, and the whole level takes
 #: f_b = delta_b / R_c from its coalescing runs' floor layers (:func:`analysis.floor_layer.bottom_factor`) at the
-#: transport level's values.
+#: transport level's values. 'zones_line' (added 2026-12-06, before any fit to the whole remade set) is 'zones_floor'
+#: with the plume as a line force (popbal.plume_law = 'line_force': c(R / R_c) = A0 / 4, measured in the compact
+#: plumes of the training runs), so that level 2's channel_coefficient is how far the full engine is from that law.
 #: What each switch of a closure set stands for (the layer's comment on it).
 SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time merging, not fitted",
-                "popbal.confinement": "the confined plume's coefficient and return flow (popbal.closures), not fitted"}
+                "popbal.confinement": "the confined plume's coefficient and return flow (popbal.closures), not fitted",
+                "popbal.plume_law": "the plume as the line force of the channel's load (popbal.closures), not fitted"}
 START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
          "bottom_layer_factor": 1.0}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).

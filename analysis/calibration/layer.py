@@ -96,7 +96,8 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
     for key, value in FORM.items():
         lines.append(f"{key.split('.', 1)[1]} = {_q(value)}  # [chosen] the closure form of every level")
     for key, value in CLOSURES[result.closures].get("switches", {}).items():
-        lines.append(f"{key.split('.', 1)[1]} = {str(value).lower()}  # [chosen] closures = {result.closures!r}: "
+        shown = _q(value) if isinstance(value, str) else str(value).lower()
+        lines.append(f"{key.split('.', 1)[1]} = {shown}  # [chosen] closures = {result.closures!r}: "
                      f"{SWITCH_NOTES[key]}")
     lines += ["", "[provenance]", f"command = {_q(command or 'settler calibrate --set')}",
               f"code_commit = {_q(commit['commit'])}", f"code_tree_dirty = {str(bool(commit['dirty'])).lower()}",
