@@ -668,7 +668,8 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
     """'zones_floor': the coalescence-off transport runs' floors fill, so level 2 fits the channel coefficient alone
     with no bottom layer, and level 3 holds f_b = the geometric mean of delta_b / R_c over its coalescing runs only
     (a coalescence-off run in the whole level is left out), at level 2's channel coefficient; the layer writes it.
-    'zones_line' is the same with popbal.plume_law = 'line_force' in every level and in the layer. The measured-zone
+    'zones_line' is the same with popbal.plume_law = 'line_force' in every level and in the layer, its level 2 scored
+    on the mean diameter and axis velocity alone (the filling floors' count and flux left out). The measured-zone
     steps and the fits are stubbed (tested above); this is the order and the choice of runs."""
     import tomllib
     from pathlib import Path
@@ -688,10 +689,11 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
         (tmp_path / run / "timeseries.csv").write_text("time\n0\n")
     registry = Registry(holdouts=(), why={}, families={}, path=tmp_path / "holdouts.toml",
                         levels={"collision": ("kernel",), "transport": ("off",), "whole": ("a", "b", "off")})
-    fixed_at = {}
+    fixed_at, columns_at = {}, {}
 
     def fit_level(level, targets, case_files, parameters, start, fixed, **kw):
         fixed_at[level] = dict(fixed)
+        columns_at[level] = kw["columns"]
         names = list(parameters)
         return LevelFit(level=level, runs=list(case_files), parameters=names, estimates={n: 0.5 for n in names},
                         standard_errors={n: 0.05 for n in names}, correlation=np.eye(len(names)), discrepancy=0.0,
@@ -717,6 +719,8 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
     result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures=closures)
     law = "line_force" if closures == "zones_line" else None
     assert fixed_at["transport"].get("popbal.plume_law") == law and fixed_at["whole"].get("popbal.plume_law") == law
+    assert columns_at["whole"] == tuple(h.TARGET_COLUMNS)
+    assert columns_at["transport"] == (("mean_diameter", "channel_velocity") if law else tuple(h.TARGET_COLUMNS))
     assert [f.parameters for f in result.levels] == [["channel_coefficient"], ["shear_coefficient"]]
     assert "popbal.bottom_layer_factor" not in fixed_at["transport"]
     assert result.floor["runs"] == ["a", "b"]

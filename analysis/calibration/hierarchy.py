@@ -66,7 +66,8 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
                             "cell_efficiency": True, "floor": True},
             "zones_line": {"levels": {"transport": ("channel_coefficient",), "whole": ("shear_coefficient",)},
                            "layers": True, "switches": LINE_FORCE, "roof_kernel": True, "dilution": True,
-                           "cell_efficiency": True, "floor": True}}
+                           "cell_efficiency": True, "floor": True,
+                           "columns": {"transport": ("mean_diameter", "channel_velocity")}}}
 #: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
 #: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
 #: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
@@ -80,7 +81,9 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
 #: f_b = delta_b / R_c from its coalescing runs' floor layers (:func:`analysis.floor_layer.bottom_factor`) at the
 #: transport level's values. 'zones_line' (added 2026-12-06, before any fit to the whole remade set) is 'zones_floor'
 #: with the plume as a line force (popbal.plume_law = 'line_force': c(R / R_c) = A0 / 4, measured in the compact
-#: plumes of the training runs), so that level 2's channel_coefficient is how far the full engine is from that law.
+#: plumes of the training runs), so that level 2's channel_coefficient is how far the full engine is from that law,
+#: fitted to the transport runs' mean diameter and axis velocity alone: their count and settling flux measure their
+#: filling floors (docs/guide/reduced-model.md), which no closure of the plume stands for.
 #: What each switch of a closure set stands for (the layer's comment on it).
 SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time merging, not fitted",
                 "popbal.confinement": "the confined plume's coefficient and return flow (popbal.closures), not fitted",
@@ -547,8 +550,9 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
         targets = [load_target(r, reference_dir, seed) for r in runs]
         case_files = {r: Path(reference_dir) / r / "case.toml" for r in runs}
         parameters = CLOSURES[closures]["levels"][level]
+        columns = CLOSURES[closures].get("columns", {}).get(level, tuple(TARGET_COLUMNS))
         fit = fit_level(level, targets, case_files, parameters, {p: START[p] for p in parameters}, fixed,
-                        max_evaluations=max_evaluations, profile=profile, progress=progress)
+                        columns=columns, max_evaluations=max_evaluations, profile=profile, progress=progress)
         levels.append(fit)
         for name in parameters:
             values[name] = (fit.estimates[name], fit.standard_errors[name])
