@@ -1,8 +1,8 @@
 """A run set's reference runs: every finished run of a run-set sweep of the full engine stored small
 (:func:`analysis.reference.store_reference`) under its run name, with what each run's own folder alone can measure:
 the kernel runs' exposure (:mod:`analysis.kernel_run`), collisions by height (:mod:`analysis.band_efficiency`) and
-what the return flow lifts off the floor (:mod:`analysis.floor_lift`) and the matte layer over it
-(:mod:`analysis.floor_layer`). Command line::
+what the return flow lifts off the floor (:mod:`analysis.floor_lift`), the matte layer over it
+(:mod:`analysis.floor_layer`) and where the droplets are across the plume (:mod:`analysis.plume_zones`). Command line::
 
     python -m analysis.reference_set SWEEP_OUT SET_FILE [--only a,b] [--dest data/reference] [--snapshots 2]
 
@@ -26,8 +26,9 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
     with the kernel runs' exposure (:mod:`analysis.kernel_run`), for runs with coalescence and a merge table their
     collisions by height (:data:`analysis.band_efficiency.COLLISIONS_FILE`), and for runs whose snapshots follow
     the droplets by ident what the return flow lifts off the floor (:data:`analysis.floor_lift.FLOOR_LIFT_FILE`),
-    and the matte layer over the floor by size (:data:`analysis.floor_layer.FLOOR_LAYER_FILE`), all measured on the
-    run folder.
+    the matte layer over the floor by size (:data:`analysis.floor_layer.FLOOR_LAYER_FILE`) and the droplets of the
+    plume's core, skirt and return flow by height (:data:`analysis.plume_zones.PLUME_ZONES_FILE`), all measured on
+    the run folder.
     ``snapshots`` is the droplet snapshots each run keeps where its entry in the set has no ``snapshots`` key. Returns
     name -> the stored folder, or -> why it was not stored (not finished)."""
     from analysis.sweep.execution import DONE_FILE, POINTS, point_hash
@@ -74,6 +75,15 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
 
         try:
             write_floor_layer(folder, results[run.name])
+        except (ValueError, NoData):
+            pass
+        # where the droplets are at each height: the plume's core, its skirt and the return flow (analysis.plume_zones);
+        # a kernel run has no feed and no plume, a slot inlet a row of plumes
+        from analysis.plume_zones import write_plume_zones
+
+        try:
+            if run.family != "kernel":
+                write_plume_zones(folder, results[run.name])
         except (ValueError, NoData):
             pass
     return results
