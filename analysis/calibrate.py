@@ -594,7 +594,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "its Reynolds number, k_R and Re_d from the fitted runs' zone diagnostics) or 'zones_floor' "
                              "('zones_dilution' with the bottom layer's factor measured in the whole runs' floor "
                              "layers, not fitted to the coalescence-off runs, whose floors fill) or 'zones_line' "
-                             "('zones_floor' with popbal.plume_law = 'line_force'); "
+                             "('zones_floor' with popbal.plume_law = 'line_force', its transport level scored on "
+                             "the mean diameter and axis velocity alone); "
                              "analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "

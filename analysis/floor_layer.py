@@ -170,9 +170,10 @@ def bottom_factor(runs, reference_dir, values: dict | None = None) -> dict:
     few droplets there, or no excess over the far value, as in the deep family, whose large droplets settle as they
     arrive), left out of the mean: their layer is not thin but absent, which f_b R_c cannot say. For coalescing runs
     only: a floor without coalescence fills (docs/guide/reduced-model.md), which is not the layer h_b stands for.
-    ValueError naming the run whose file is missing, or when no run has a layer."""
+    ValueError naming the run whose file is missing, holds no thickness or one not positive and finite, whose case
+    popbal refuses or gives no channel at ``values``, or when no run has a layer."""
     from popbal.model import channel_closure
-    from settler.cases import NO_CALIBRATION, load_case
+    from settler.cases import NO_CALIBRATION, CaseError, load_case
 
     if not runs:
         raise ValueError("the bottom layer factor needs at least one stored run with its floor layer; none was given")
@@ -183,15 +184,22 @@ def bottom_factor(runs, reference_dir, values: dict | None = None) -> dict:
         if not path.is_file():
             raise ValueError(f"{path}: missing (python -m analysis.reference_set writes it beside every stored run, "
                              "python -m analysis.floor_layer measures a run folder)")
-        thickness = read_floor_layer(path)[1]["thickness"]
+        try:
+            thickness = read_floor_layer(path)[1]["thickness"]
+        except (KeyError, ValueError, IndexError) as exc:
+            raise ValueError(f"{path}: no thickness in its header ({exc}); rewrite it with python -m "
+                             "analysis.reference_set") from None
         if math.isnan(thickness):
             no_layer.append(run)
             continue
-        if not thickness > 0.0:
-            raise ValueError(f"{path}: floor layer thickness {thickness!r} m; allowed: a positive thickness or NaN "
-                             "(no layer)")
-        case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION, **(values or {})})
-        radius = channel_closure(case)[0]
+        if not (math.isfinite(thickness) and thickness > 0.0):
+            raise ValueError(f"{path}: floor layer thickness {thickness!r} m; allowed: a positive finite thickness or "
+                             "NaN (no layer)")
+        try:
+            case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION, **(values or {})})
+            radius = channel_closure(case)[0]
+        except CaseError as exc:
+            raise ValueError(f"{run}: {exc}") from None
         if not radius > 0.0:
             raise ValueError(f"{run}: popbal's channel radius is {radius!r} m at the values given; allowed: a channel "
                              "(popbal.channel_radius_factor > 0)")

@@ -5,8 +5,9 @@ uniform disk. Over a run's steady window (its last third if none; :func:`analysi
 droplet snapshot and each of the :data:`settler.output.PROFILE_BANDS` height bands, the band's droplets are split by
 their distance r from the inlet axis:
 
-- **core**, r < a: a the band's half-volume radius at that time (:func:`settler.output.half_volume_radius`, the
-  ``channel_radius`` of ``channel_profile.csv``), so the core holds half the band's droplet volume by definition;
+- **core**, r < a: a the band's half-volume radius in that snapshot, computed from its droplets as
+  ``channel_profile.csv``'s ``channel_radius`` is (:func:`settler.output.half_volume_radius`), so the core holds half
+  the band's droplet volume by definition;
 - **skirt**, a <= r < r_0: r_0 the ``return_radius`` of ``zone_profile.csv`` at that time and band, where the
   ring-averaged slag turns from down to up: droplets outside the core in the plume's downflow;
 - **return**, r >= max(a, r_0): droplets in the rising slag (where r_0 < a, as in simple and cubic, the skirt is
@@ -67,7 +68,7 @@ def zone_table(snapshots, channel: pd.DataFrame, zones: pd.DataFrame, height: fl
     """The table of :data:`PLUME_ZONES_UNITS` from ``snapshots`` [(time [s], droplets DataFrame with x, y, z [m],
     diameter [m], w [m/s])], the run's ``channel`` and ``zones`` profiles (``channel_profile.csv``,
     ``zone_profile.csv``) and the inlet ``axis`` (x, y) [m], in the profiles' bands over ``height`` [m]. ValueError
-    where a snapshot's time has no profile row."""
+    naming the file where a snapshot's time, or a band at it, has no profile row."""
     from settler.output import PROFILE_BANDS, band_edges, half_volume_radius
 
     edges = band_edges(height, bands or PROFILE_BANDS)
@@ -76,9 +77,10 @@ def zone_table(snapshots, channel: pd.DataFrame, zones: pd.DataFrame, height: fl
     for time, frame in snapshots:
         rows_c = channel[np.isclose(channel["time"], time, rtol=0.0, atol=1e-6)]
         rows_z = zones[np.isclose(zones["time"], time, rtol=0.0, atol=1e-6)]
-        if rows_c.empty or rows_z.empty:
-            raise ValueError(f"no channel or zone profile row at the snapshot time {time:g} s (written at every "
-                             "snapshot by the full engine)")
+        for name, rows in (("channel_profile.csv", rows_c), ("zone_profile.csv", rows_z)):
+            if rows.empty:
+                raise ValueError(f"{name}: no row at the snapshot time {time:g} s (written at every snapshot by the "
+                                 "full engine)")
         z = frame["z"].to_numpy(dtype=float)
         r = np.hypot(frame["x"].to_numpy(dtype=float) - axis[0], frame["y"].to_numpy(dtype=float) - axis[1])
         volume = np.pi / 6.0 * frame["diameter"].to_numpy(dtype=float) ** 3
@@ -88,11 +90,15 @@ def zone_table(snapshots, channel: pd.DataFrame, zones: pd.DataFrame, height: fl
             centre = 0.5 * (low + high)
             r0 = rows_z.loc[np.isclose(rows_z["z"], centre, rtol=1e-9, atol=1e-12), "return_radius"]
             u = rows_c.loc[np.isclose(rows_c["z"], centre, rtol=1e-9, atol=1e-12), "channel_velocity"]
-            axis_sum[b] += float(u.iloc[0]) if len(u) else math.nan
+            for name, column in (("zone_profile.csv", r0), ("channel_profile.csv", u)):
+                if column.empty:
+                    raise ValueError(f"{name}: no row at {time:g} s for the band centred at z = {centre:g} m (the "
+                                     f"profiles' bands differ from {len(edges) - 1} equal bands of the height)")
+            axis_sum[b] += float(u.iloc[0])
             if not inside.any():
                 continue
             a = half_volume_radius(r[inside], volume[inside])
-            split = split_band(r[inside], volume[inside], down[inside], a, float(r0.iloc[0]) if len(r0) else math.nan)
+            split = split_band(r[inside], volume[inside], down[inside], a, float(r0.iloc[0]))
             for part in PARTS:
                 sums[part][b] += split[part]
     count, dz = len(snapshots), edges[1] - edges[0]

@@ -730,6 +730,7 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
               for r in "ab"}
     expected = math.sqrt(4e-3 / radius["a"] * 3e-3 / radius["b"])
     assert fixed_at["whole"]["popbal.bottom_layer_factor"] == pytest.approx(expected, rel=1e-12)
+    assert result.values["bottom_layer_factor"] == (result.floor["value"], result.floor["standard_error"])
     assert fixed_at["whole"]["popbal.channel_coefficient"] == 0.5
     layer = tomllib.loads(write_layer(result, tmp_path / "floor.toml", tmp_path / "holdouts.toml", "x").read_text())
     assert layer["popbal"]["bottom_layer_factor"] == pytest.approx(expected, rel=1e-12)

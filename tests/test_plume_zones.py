@@ -31,7 +31,8 @@ def test_a_constructed_plume_is_measured_stored_and_read_back(tmp_path):
     the axis falling at 40 mm/s, 100 at 12-20 mm at 20 mm/s and 100 at 30-45 mm rising at 1 mm/s; the return radius 25
     mm. The half-volume radius falls between 5 and 12 mm, so the core holds the 200 (share 0.5, 40 / 45 of the axis
     velocity), the skirt and the return flow a quarter each; the loads are the counts' volume over the band's 10 mm;
-    the other bands are empty (NaN velocities); the file round-trips."""
+    the other bands are empty (NaN velocities); the file round-trips; a profile without a band's row is refused by
+    name, not read as a band without return flow."""
     rng = np.random.default_rng(5)
     radius = np.concatenate([np.linspace(1e-3, 5e-3, 200), np.linspace(12e-3, 20e-3, 100),
                              np.linspace(30e-3, 45e-3, 100)])
@@ -69,3 +70,8 @@ def test_a_constructed_plume_is_measured_stored_and_read_back(tmp_path):
     assert np.allclose(back["core_load"], table["core_load"], rtol=1e-6, equal_nan=True)
     with pytest.raises(ValueError, match="no droplet snapshot within 0-10 s"):
         measure_plume_zones(folder, (0.0, 10.0))
+    write_table([{"time": 20.0, "z": z, "volume_fraction": 0.0, "core_volume_fraction": math.nan,
+                  "upward_slag_flux": 0.0, "downward_slag_flux": 0.0, "return_radius": 0.025, "rising_volume": 0.0}
+                 for z in centres[:-1]], ZONE_PROFILE, folder / "zone_profile.csv")  # a band's row missing
+    with pytest.raises(ValueError, match=r"zone_profile.csv: no row at 20 s for the band centred at z = 0.095 m"):
+        measure_plume_zones(folder, (15.0, 20.0))

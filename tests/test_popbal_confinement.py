@@ -93,11 +93,11 @@ def test_a_channel_as_wide_as_the_column_is_refused():
 
 def test_the_line_force_law_solves_radius_and_velocity_together_and_needs_confinement():
     """popbal.plume_law = 'line_force': u_s^2 = c_ch (A0(R/R_c) / 4) Q drho g / (pi mu), A0 = 2 ln(R/R_c) - 1 +
-    (R_c/R)^2 the confined line force's axis coefficient, with R_c = k_R sqrt(Q / (pi u_s)), to 1e-10; 'uniform_core'
-    is the law without the key, bit for bit; without confinement the key is refused by name."""
+    (R_c/R)^2 the confined line force's axis coefficient, with R_c = k_R sqrt(Q / (pi u_s)), to 1e-10, and the return
+    flow r S(R/R_c) u_s of the uniform core's share; without confinement the key is refused by name."""
     overrides = {"case.calibration": "none", "popbal.channel_radius_form": "flux", "popbal.channel_radius_factor": 4.0,
                  "popbal.confinement": True, "popbal.channel_coefficient": 0.7, "popbal.height_cells": 10}
-    case = load_case("demo", {**overrides, "popbal.plume_law": "line_force"})
+    case = load_case("demo", {**overrides, "popbal.plume_law": "line_force", "popbal.return_flow_ratio": 0.8})
     model = popbal.setup(case)
     u, radius = model.parameters["plume_velocity"], model.channel_radius
     q = case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
@@ -107,9 +107,7 @@ def test_the_line_force_law_solves_radius_and_velocity_together_and_needs_confin
     assert u**2 == pytest.approx(0.7 * a0 / 4.0 * q * drho * STANDARD_GRAVITY / (math.pi * case.slag_viscosity),
                                  rel=1e-10)
     assert radius == pytest.approx(4.0 * math.sqrt(q / (math.pi * u)), rel=1e-10)
-    default = popbal.setup(load_case("demo", overrides))
-    explicit = popbal.setup(load_case("demo", {**overrides, "popbal.plume_law": "uniform_core"}))
-    assert explicit.parameters["plume_velocity"] == default.parameters["plume_velocity"]
-    assert np.array_equal(explicit.cloud_coefficient, default.cloud_coefficient)
+    # the return flow keeps the uniform core's share S(R/R_c) of the (line-force) axis velocity
+    assert model.return_velocity == pytest.approx(0.8 * closures.confined_return_share(column / radius) * u, rel=1e-12)
     with pytest.raises(CaseError, match=r"popbal.plume_law = 'line_force': .* only with popbal.confinement = true"):
         popbal.setup(load_case("demo", {**overrides, "popbal.confinement": False, "popbal.plume_law": "line_force"}))

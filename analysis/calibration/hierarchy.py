@@ -544,9 +544,13 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
         if level == "whole" and CLOSURES[closures].get("floor"):  # the coalescing whole runs' floors, level 2 held
             from analysis.floor_layer import bottom_factor
 
-            floor = bottom_factor([r for r in runs if load_case(Path(reference_dir) / r / "case.toml")
-                                   .coalescence.enabled], reference_dir, fixed)
+            coalescing = [r for r in runs if load_case(Path(reference_dir) / r / "case.toml").coalescence.enabled]
+            if not coalescing:
+                raise ValueError(f"closures {closures!r} measure the bottom layer in the whole level's coalescing runs; "
+                                 f"none of {', '.join(runs) or 'no run'} has coalescence.enabled = true")
+            floor = bottom_factor(coalescing, reference_dir, fixed)
             fixed["popbal.bottom_layer_factor"] = floor["value"]
+            values["bottom_layer_factor"] = (floor["value"], floor["standard_error"])  # measured: into the bands
         targets = [load_target(r, reference_dir, seed) for r in runs]
         case_files = {r: Path(reference_dir) / r / "case.toml" for r in runs}
         parameters = CLOSURES[closures]["levels"][level]
@@ -584,6 +588,9 @@ def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, sample
         index = [keys.index(n) for n in fit.parameters]
         se = np.array([fit.standard_errors[n] for n in fit.parameters])
         covariance[np.ix_(index, index)] = fit.correlation * np.outer(se, se)
+    for i, key in enumerate(keys):  # a value measured, not fitted (the floor layer's f_b): its own standard error
+        if covariance[i, i] == 0.0 and math.isfinite(values[key][1]):
+            covariance[i, i] = values[key][1] ** 2
     delta = max(fit.discrepancy for fit in levels)
     draws = parameter_samples(estimates, covariance, keys, samples, seed=1)
     errors, bands, observed = {}, {}, {}
