@@ -214,44 +214,27 @@ def bottom_factor(runs, reference_dir, values: dict | None = None) -> dict:
             "per_run": per_run, "no_layer": no_layer, "runs": list(per_run)}
 
 
+def _report(folder, table, meta) -> None:
+    print(f"{folder}: {meta['window'][0]:g}-{meta['window'][1]:g} s, {len(meta['snapshots'])} snapshots; "
+          f"layer thickness by volume {meta['thickness'] * 1e3:.2f} mm")
+    show = table.copy()
+    for column in ("diameter_low", "diameter_high", "mean_diameter", "thickness"):
+        show[column] *= 1e3
+    show["settling_velocity"] *= 1e3
+    print(show.rename(columns={"diameter_low": "d_low [mm]", "diameter_high": "d_high [mm]", "mean_diameter": "d [mm]",
+                               "settling_velocity": "U [mm/s]", "floor_number": "n(0) [1/m]",
+                               "far_number": "n_far [1/m]", "thickness": "delta [mm]"}).to_string(
+        index=False, float_format=lambda x: f"{x:.4g}"))
+
+
 def main(argv=None) -> int:
-    import argparse
-    import sys
+    from .steady import window_measure_main
 
-    from settler.errors import OutputError
-
-    from .steady import parse_window
-
-    parser = argparse.ArgumentParser(prog="python -m analysis.floor_layer",
-                                     description="the matte layer over the floor of full runs, by size (the measure "
-                                                 "of popbal's bottom layer thickness)")
-    parser.add_argument("runs", nargs="+", help="full run folders or stored references (one snapshot gives a noisy "
-                                                "profile; a run folder's every snapshot in the window is used)")
-    parser.add_argument("--window", help="START:END [s]; default each run's steady window, else its last third")
-    args = parser.parse_args(argv)
-    try:
-        window = parse_window(args.window) if args.window else None
-    except ValueError as exc:
-        print(f"{parser.prog}: {exc}", file=sys.stderr)
-        return 2
-    for folder in args.runs:
-        try:
-            table, meta = measure_floor_layer(folder, window)
-        except (OutputError, ValueError, OSError) as exc:
-            print(f"{parser.prog}: {folder}: {exc}", file=sys.stderr)
-            return 2
-        print(f"{folder}: {meta['window'][0]:g}-{meta['window'][1]:g} s, {len(meta['snapshots'])} snapshots; "
-              f"layer thickness by volume {meta['thickness'] * 1e3:.2f} mm")
-        show = table.copy()
-        for column in ("diameter_low", "diameter_high", "mean_diameter", "thickness"):
-            show[column] *= 1e3
-        show["settling_velocity"] *= 1e3
-        print(show.rename(columns={"diameter_low": "d_low [mm]", "diameter_high": "d_high [mm]",
-                                   "mean_diameter": "d [mm]", "settling_velocity": "U [mm/s]",
-                                   "floor_number": "n(0) [1/m]", "far_number": "n_far [1/m]",
-                                   "thickness": "delta [mm]"}).to_string(index=False,
-                                                                         float_format=lambda x: f"{x:.4g}"))
-    return 0
+    return window_measure_main(
+        argv, "python -m analysis.floor_layer",
+        "the matte layer over the floor of full runs, by size (the measure of popbal's bottom layer thickness)",
+        "full run folders or stored references (one snapshot gives a noisy profile; a run folder's every snapshot "
+        "in the window is used)", measure_floor_layer, _report)
 
 
 if __name__ == "__main__":

@@ -213,45 +213,28 @@ def read_floor_lift(path) -> tuple[pd.DataFrame, dict]:
     return pd.read_csv(path, comment="#"), meta
 
 
+def _report(folder, table, meta) -> None:
+    se = meta["standard_errors"]
+    print(f"{folder}: {meta['window'][0]:g}-{meta['window'][1]:g} s, {len(meta['snapshots'])} snapshots; "
+          f"lifted share lambda {meta['share']:.4f} +- {se[0]:.4f}, u_b {meta['lift_velocity'] * 1e3:.3f} +- "
+          f"{se[1] * 1e3:.3f} mm/s, mid-height upflow {meta['upflow'] * 1e3:.3f} mm/s, beta "
+          f"{meta['velocity_ratio']:.3f}")
+    show = table[table["held"] > 0].copy()
+    for column in ("diameter_low", "diameter_high", "mean_diameter"):
+        show[column] *= 1e3
+    show["settling_velocity"] *= 1e3
+    print(show.rename(columns={"diameter_low": "d_low [mm]", "diameter_high": "d_high [mm]", "mean_diameter": "d [mm]",
+                               "settling_velocity": "U [mm/s]", "lifted": "lifted [1/s]",
+                               "left": "left [1/s]"}).to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+
+
 def main(argv=None) -> int:
-    import argparse
-    import sys
+    from .steady import window_measure_main
 
-    from settler.errors import OutputError
-
-    from .steady import parse_window
-
-    parser = argparse.ArgumentParser(prog="python -m analysis.floor_lift",
-                                     description="what the return flow lifts off the floor of full runs, by size "
-                                                 "(the measure of popbal's bottom_lift_share)")
-    parser.add_argument("runs", nargs="+", help="full run folders (a stored reference keeps too few snapshots)")
-    parser.add_argument("--window", help="START:END [s]; default each run's steady window, else its last third")
-    args = parser.parse_args(argv)
-    try:
-        window = parse_window(args.window) if args.window else None
-    except ValueError as exc:
-        print(f"{parser.prog}: {exc}", file=sys.stderr)
-        return 2
-    for folder in args.runs:
-        try:
-            table, meta = measure_floor_lift(folder, window)
-        except (OutputError, ValueError, OSError) as exc:
-            print(f"{parser.prog}: {folder}: {exc}", file=sys.stderr)
-            return 2
-        se = meta["standard_errors"]
-        print(f"{folder}: {meta['window'][0]:g}-{meta['window'][1]:g} s, {len(meta['snapshots'])} snapshots; "
-              f"lifted share lambda {meta['share']:.4f} +- {se[0]:.4f}, u_b {meta['lift_velocity'] * 1e3:.3f} +- "
-              f"{se[1] * 1e3:.3f} mm/s, mid-height upflow {meta['upflow'] * 1e3:.3f} mm/s, beta "
-              f"{meta['velocity_ratio']:.3f}")
-        show = table[table["held"] > 0].copy()
-        for column in ("diameter_low", "diameter_high", "mean_diameter"):
-            show[column] *= 1e3
-        show["settling_velocity"] *= 1e3
-        print(show.rename(columns={"diameter_low": "d_low [mm]", "diameter_high": "d_high [mm]",
-                                   "mean_diameter": "d [mm]", "settling_velocity": "U [mm/s]",
-                                   "lifted": "lifted [1/s]", "left": "left [1/s]"}).to_string(
-            index=False, float_format=lambda x: f"{x:.4g}"))
-    return 0
+    return window_measure_main(
+        argv, "python -m analysis.floor_lift",
+        "what the return flow lifts off the floor of full runs, by size (the measure of popbal's bottom_lift_share)",
+        "full run folders (a stored reference keeps too few snapshots)", measure_floor_lift, _report)
 
 
 if __name__ == "__main__":

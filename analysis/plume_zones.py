@@ -166,40 +166,23 @@ def shares(table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+def _report(folder, table, meta) -> None:
+    print(f"{folder}: {meta['window'][0]:g}-{meta['window'][1]:g} s, {len(meta['snapshots'])} snapshots")
+    show = shares(table)
+    show.insert(1, "u [mm/s]", table["axis_velocity"] * 1e3)
+    show["z"] *= 1e3
+    print(show.rename(columns={"z": "z [mm]"}).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
+
+
 def main(argv=None) -> int:
-    import argparse
-    import sys
+    from .steady import window_measure_main
 
-    from settler.errors import OutputError
-
-    from .files import NoData
-    from .steady import parse_window
-
-    parser = argparse.ArgumentParser(prog="python -m analysis.plume_zones",
-                                     description="where a full run's droplets are at each height: the plume's core, "
-                                                 "its skirt and the return flow (shares of the band's droplet volume, "
-                                                 "velocities over the axis velocity)")
-    parser.add_argument("runs", nargs="+", help="full run folders or stored references (a reference keeps few "
-                                                "snapshots; a run folder's every snapshot in the window is used)")
-    parser.add_argument("--window", help="START:END [s]; default each run's steady window, else its last third")
-    args = parser.parse_args(argv)
-    try:
-        window = parse_window(args.window) if args.window else None
-    except ValueError as exc:
-        print(f"{parser.prog}: {exc}", file=sys.stderr)
-        return 2
-    for folder in args.runs:
-        try:
-            table, meta = measure_plume_zones(folder, window)
-        except (OutputError, ValueError, OSError, NoData) as exc:
-            print(f"{parser.prog}: {folder}: {exc}", file=sys.stderr)
-            return 2
-        print(f"{folder}: {meta['window'][0]:g}-{meta['window'][1]:g} s, {len(meta['snapshots'])} snapshots")
-        show = shares(table)
-        show.insert(1, "u [mm/s]", table["axis_velocity"] * 1e3)
-        show["z"] *= 1e3
-        print(show.rename(columns={"z": "z [mm]"}).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
-    return 0
+    return window_measure_main(
+        argv, "python -m analysis.plume_zones",
+        "where a full run's droplets are at each height: the plume's core, its skirt and the return flow (shares of "
+        "the band's droplet volume, velocities over the axis velocity)",
+        "full run folders or stored references (a reference keeps few snapshots; a run folder's every snapshot in "
+        "the window is used)", measure_plume_zones, _report)
 
 
 if __name__ == "__main__":

@@ -75,3 +75,32 @@ def parse_window(text: str) -> tuple[float, float]:
     if len(window) != 2 or not window[0] < window[1]:
         raise ValueError(f"--window {text!r}: allowed START:END in seconds, START < END")
     return window
+
+
+def window_measure_main(argv, prog: str, description: str, runs_help: str, measure, report) -> int:
+    """The command line of a measure taken over each run's steady window (``python -m analysis.floor_layer``,
+    ``analysis.floor_lift``, ``analysis.plume_zones``): ``RUN... [--window START:END]``. ``measure(folder, window)``
+    returns (table, meta), ``report(folder, table, meta)`` prints them. Exit 0, or 2 with one line naming the bad
+    window or the run whose measure failed (no traceback)."""
+    import argparse
+    import sys
+
+    from .files import NoData, OutputError
+
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser.add_argument("runs", nargs="+", help=runs_help)
+    parser.add_argument("--window", help="START:END [s]; default each run's steady window, else its last third")
+    args = parser.parse_args(argv)
+    try:
+        window = parse_window(args.window) if args.window else None
+    except ValueError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
+    for folder in args.runs:
+        try:
+            table, meta = measure(folder, window)
+        except (OutputError, ValueError, OSError, NoData) as exc:
+            print(f"{prog}: {folder}: {exc}", file=sys.stderr)
+            return 2
+        report(folder, table, meta)
+    return 0

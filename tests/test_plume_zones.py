@@ -75,3 +75,31 @@ def test_a_constructed_plume_is_measured_stored_and_read_back(tmp_path):
                  for z in centres[:-1]], ZONE_PROFILE, folder / "zone_profile.csv")  # a band's row missing
     with pytest.raises(ValueError, match=r"zone_profile.csv: no row at 20 s for the band centred at z = 0.095 m"):
         measure_plume_zones(folder, (15.0, 20.0))
+
+
+def test_the_window_measure_command_line_reports_each_run_and_refuses_bad_input_in_one_line(capsys):
+    """analysis.steady.window_measure_main (the command line of floor_layer, floor_lift and plume_zones): each run's
+    measure over the --window given is reported in order; a bad window and a failing run exit 2 with one line naming
+    the value or the run, and no run after a failing one is measured."""
+    from analysis.steady import window_measure_main
+
+    seen = []
+
+    def measure(folder, window):
+        if folder == "bad":
+            raise ValueError("no droplet snapshot")
+        seen.append((folder, window))
+        return "table", {"window": window}
+
+    def report(folder, table, meta):
+        print(f"{folder} {table} {meta['window']}")
+
+    args = ("prog", "what", "runs", measure, report)
+    assert window_measure_main(["a", "b", "--window", "10:20"], *args) == 0
+    assert seen == [("a", (10.0, 20.0)), ("b", (10.0, 20.0))]
+    assert capsys.readouterr().out.splitlines() == ["a table (10.0, 20.0)", "b table (10.0, 20.0)"]
+    assert window_measure_main(["a", "--window", "20:10"], *args) == 2
+    assert "prog: --window '20:10': allowed START:END" in capsys.readouterr().err
+    seen.clear()
+    assert window_measure_main(["bad", "a"], *args) == 2
+    assert capsys.readouterr().err.strip() == "prog: bad: no droplet snapshot" and seen == []
