@@ -1,0 +1,127 @@
+"""analysis.plume_force: the confined Stokes axis velocity a band's droplets drive, against the closed form of a
+uniform core, an independent finite-difference solution of the same flow, and on a constructed run."""
+
+import math
+
+import numpy as np
+import pytest
+
+from analysis.plume_force import (GRAVITY, measure_plume_force, ring_kernel, stokes_axis_velocity)
+from popbal.closures import confined_axis_coefficient
+from popbal.model import column_radius
+from settler.cases import load_case
+from settler.output import CHANNEL_PROFILE, band_edges, write_table
+from tests.test_floor_lift import _run_folder
+
+MU, DRHO, R = 0.45, 1600.0, 0.0564  # slag viscosity [Pa s], density difference [kg/m^3], column radius [m]
+
+
+def _finite_difference_axis_velocity(force_density, radius, cells=4000):
+    """Axis velocity [m/s] of mu (1/r) d/dr (r dw/dr) = G - f(r) on 0 < r < R (w downward), w(R) = 0, dw/dr(0) = 0 and
+    zero net flux fixing G: second-order finite volumes, G from the superposition of the force's and a unit G's
+    solutions. Independent of the ring kernel's algebra."""
+    edges = np.linspace(0.0, radius, cells + 1)
+    centres = 0.5 * (edges[1:] + edges[:-1])
+    h = edges[1] - edges[0]
+    n = cells
+    matrix = np.zeros((n, n))
+    for i in range(n):  # flux form: [r_{i+1/2} (w_{i+1} - w_i) - r_{i-1/2} (w_i - w_{i-1})] / (h^2 r_i)
+        outer, inner = edges[i + 1], edges[i]
+        if i + 1 < n:
+            matrix[i, i + 1] += outer
+            matrix[i, i] -= outer
+        else:  # w(R) = 0 half a cell beyond the last centre
+            matrix[i, i] -= 2.0 * outer
+        if i > 0:
+            matrix[i, i - 1] += inner
+            matrix[i, i] -= inner
+        matrix[i] *= MU / (h * h * centres[i])
+    area = 2.0 * math.pi * centres * h
+    w_force = np.linalg.solve(matrix, -force_density(centres))
+    w_unit = np.linalg.solve(matrix, np.ones(n))
+    pressure = -np.sum(w_force * area) / np.sum(w_unit * area)
+    w = w_force + pressure * w_unit
+    return float(w[0] + (w[0] - w[1]) * centres[0] ** 2 / (centres[1] ** 2 - centres[0] ** 2))
+
+
+def test_the_ring_kernel_averaged_over_a_uniform_core_is_the_confined_plume_law():
+    """K averaged over a disk of radius a (area-weighted midpoint quadrature) is A0(R/a) of popbal.closures at R/a 1.5,
+    3 and 12, to 1e-6; beyond R a ring counts as at R (K = 0); a ring on the axis is refused."""
+    for ratio in (1.5, 3.0, 12.0):
+        a = R / ratio
+        edges = np.linspace(0.0, a, 200001)
+        r = 0.5 * (edges[1:] + edges[:-1])
+        mean = np.sum(ring_kernel(r, R) * r) / np.sum(r)
+        assert mean == pytest.approx(confined_axis_coefficient(ratio), abs=1e-6)
+    assert ring_kernel(2.0 * R, R) == 0.0 and ring_kernel(R, R) == 0.0
+    assert ring_kernel(0.46 * R, R) < 0.0 < ring_kernel(0.44 * R, R)  # the outer slag holds the axis back
+    with pytest.raises(ValueError, match="line force on the axis"):
+        ring_kernel([0.0, 0.01], R)
+
+
+@pytest.mark.parametrize("shape", ["ring", "gaussian", "outer ring"])
+def test_the_axis_velocity_matches_a_finite_difference_solution_of_the_confined_flow(shape):
+    """Droplets placed as a thin ring at 10 mm, a Gaussian plume of 8 mm width and a ring at 40 mm (beyond the return
+    radius: it pushes the axis up): u_K agrees with the finite-difference solution of the same load spread over
+    rings within 0.3 %."""
+    dz = 0.01
+    if shape == "gaussian":
+        r = np.linspace(1e-5, R, 20000)
+        weight = np.exp(-0.5 * (r / 8e-3) ** 2) * r
+    else:
+        centre = 0.01 if shape == "ring" else 0.04
+        r = np.linspace(centre - 1e-3, centre + 1e-3, 2001)
+        weight = r.copy()
+    volume = 1e-9 * weight / weight.sum()  # 1 mm^3 in the band
+    got = stokes_axis_velocity(r, volume, dz, R, MU, DRHO, min_radius=1e-6)
+    edges = np.linspace(0.0, R, 4001)
+    load, _ = np.histogram(r, bins=edges, weights=volume)
+    ring_area = math.pi * (edges[1:] ** 2 - edges[:-1] ** 2)
+    density = DRHO * GRAVITY * load / (ring_area * dz)  # N/m^3
+
+    def force(centres):
+        return np.interp(centres, 0.5 * (edges[1:] + edges[:-1]), density)
+
+    want = _finite_difference_axis_velocity(force, R)
+    assert got == pytest.approx(want, rel=3e-3)
+    assert (got < 0.0) == (shape == "outer ring")
+
+
+def test_a_constructed_plume_is_measured_band_by_band(tmp_path):
+    """One snapshot of the demo (100 mm high, 5 mm cells): 300 droplets on a ring
+    of 10 mm in the band 40-50 mm and 300 at 2-3 mm in the band 50-60 mm, the measured axis velocity there 30 and 20
+    mm/s. u_K in each band is the ring kernel's sum (the inner ones regularised at half a cell where closer); the
+    middle ratio is the mean velocity over the mean u_K of bands 4-7; loads are the droplets' volume over 10 mm; a
+    profile without the snapshot's time is refused by name."""
+    rng = np.random.default_rng(7)
+    d = 5e-4
+    volume = math.pi / 6.0 * d**3
+    radius = np.concatenate([np.full(300, 0.01), rng.uniform(2e-3, 3e-3, 300)])
+    angle = rng.uniform(0.0, 2.0 * math.pi, 600)
+    z = np.concatenate([rng.uniform(0.041, 0.049, 300), rng.uniform(0.051, 0.059, 300)])
+    points = np.column_stack([0.05 + radius * np.cos(angle), 0.05 + radius * np.sin(angle), z])
+    data = {"diameter": np.full(600, d), "velocity": np.zeros((600, 3)), "density": np.full(600, 5100.0),
+            "age": np.zeros(600), "ident": np.arange(600, dtype=float), "merged": np.zeros(600)}
+    folder = tmp_path / "run"
+    _run_folder(folder, [(20.0, points, data)])
+    centres = 0.5 * (band_edges(0.1)[:-1] + band_edges(0.1)[1:])
+    axis = {0.045: 0.03, 0.055: 0.02}
+    write_table([{"time": 20.0, "z": c, "channel_radius": math.nan,
+                  "channel_velocity": next((u for k, u in axis.items() if abs(k - c) < 1e-9), 0.0),
+                  "droplet_volume": 0.0} for c in centres], CHANNEL_PROFILE, folder / "channel_profile.csv")
+    case = load_case("demo")
+    column, mu, drho = column_radius(case), case.slag_viscosity, case.matte.density - case.slag.density
+    table, meta = measure_plume_force(folder, (15.0, 20.0))
+    assert meta["snapshots"] == [20.0]
+    scale = drho * GRAVITY * volume / (0.01 * 4.0 * math.pi * mu)
+    ring = 300 * scale * ring_kernel(0.01, column)
+    inner = scale * ring_kernel(np.maximum(radius[300:], 0.5 * case.fulldem.cell_size), column).sum()
+    assert table["stokes_axis_velocity"].iloc[4] == pytest.approx(ring, rel=1e-9)
+    assert table["stokes_axis_velocity"].iloc[5] == pytest.approx(inner, rel=1e-9)
+    assert table["load"].iloc[4] == pytest.approx(300 * volume / 0.01, rel=1e-12)
+    assert table.drop(index=[4, 5])["stokes_axis_velocity"].abs().sum() == 0.0
+    assert meta["middle_ratio"] == pytest.approx(0.05 / (ring + inner), rel=1e-9)
+    write_table([{"time": 21.0, "z": c, "channel_radius": math.nan, "channel_velocity": 0.0, "droplet_volume": 0.0}
+                 for c in centres], CHANNEL_PROFILE, folder / "channel_profile.csv")
+    with pytest.raises(ValueError, match="channel_profile.csv: no row at the snapshot time 20 s"):
+        measure_plume_force(folder, (15.0, 20.0))
