@@ -19,7 +19,8 @@ r regularised at half the engine's cell h, over which the full engine spreads ea
 axis drives a cell, not a line; droplets beyond R, in the box's corners, count as at R, K = 0).
 :func:`measure_plume_force` takes it over a run's steady window (each droplet snapshot, each of
 :data:`settler.output.PROFILE_BANDS` bands) beside the measured axis velocity (``channel_profile.csv``) and the load
-per height. It neglects the slag's inertia (the plume's Reynolds number reaches 10-20 in the demo's and the paper's
+per height; :func:`write_plume_force` stores the table beside a reference run (:data:`PLUME_FORCE_FILE`, written by
+``python -m analysis.reference_set``). It neglects the slag's inertia (the plume's Reynolds number reaches 10-20 in the demo's and the paper's
 cases), the column's finite height (the top and bottom bands, where the flow turns) and the droplets' own
 acceleration.
 
@@ -33,10 +34,13 @@ radius (the line-force law) gave 0.77-1.68.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+#: The stored table's name beside a reference run.
+PLUME_FORCE_FILE = "plume_force.csv"
 #: The standard gravity [m/s^2] of the engine (settler.physics).
 GRAVITY = 9.80665
 #: Its columns: name -> (unit, meaning).
@@ -114,8 +118,6 @@ def measure_plume_force(run, window: tuple[float, float] | None = None) -> tuple
     its last third): :func:`force_table` of its droplet snapshots there; meta {"window", "snapshots", "feed"
     (the matte feed [m^3/s]), "middle_ratio" (mean axis velocity over mean u_K in :data:`MIDDLE_BANDS`)}. ValueError
     where the window holds no droplet snapshot, the run lacks its channel profile, or its inlet is a slot."""
-    from pathlib import Path
-
     from popbal.model import column_radius
     from settler.output import read_table
 
@@ -142,6 +144,31 @@ def measure_plume_force(run, window: tuple[float, float] | None = None) -> tuple
             "feed": case.feed.mass_rate / case.matte.density,
             "middle_ratio": float(middle["axis_velocity"].mean() / middle["stokes_axis_velocity"].mean())}
     return table, meta
+
+
+def write_plume_force(run_folder, dest, window: tuple[float, float] | None = None) -> Path:
+    """Measure ``run_folder`` over ``window`` (:func:`measure_plume_force`) and write :data:`PLUME_FORCE_FILE` into
+    ``dest`` atomically, the window and the snapshots in its header."""
+    from settler.output import atomic_write_text, units_line
+
+    from .files import window_header
+
+    table, meta = measure_plume_force(run_folder, window)
+    header = units_line(PLUME_FORCE_UNITS) + window_header(meta["window"], meta["snapshots"], {})
+    path = Path(dest) / PLUME_FORCE_FILE
+    atomic_write_text(path, header + table.to_csv(index=False, float_format="%.7g"))
+    return path
+
+
+def read_plume_force(path) -> tuple[pd.DataFrame, dict]:
+    """The (table, meta) a :func:`write_plume_force` file holds (meta: window, snapshots, middle_ratio)."""
+    from .files import read_window_header
+
+    fields = read_window_header(path)
+    table = pd.read_csv(path, comment="#")
+    middle = table.iloc[MIDDLE_BANDS]
+    return table, {"window": fields["window"], "snapshots": fields["snapshots"],
+                   "middle_ratio": float(middle["axis_velocity"].mean() / middle["stokes_axis_velocity"].mean())}
 
 
 def _report(folder, table, meta) -> None:

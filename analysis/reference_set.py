@@ -2,7 +2,8 @@
 (:func:`analysis.reference.store_reference`) under its run name, with what each run's own folder alone can measure:
 the kernel runs' exposure (:mod:`analysis.kernel_run`), collisions by height (:mod:`analysis.band_efficiency`) and
 what the return flow lifts off the floor (:mod:`analysis.floor_lift`), the matte layer over it
-(:mod:`analysis.floor_layer`) and where the droplets are across the plume (:mod:`analysis.plume_zones`). Command line::
+(:mod:`analysis.floor_layer`), where the droplets are across the plume (:mod:`analysis.plume_zones`) and the plume's
+axis velocity against the Stokes flow they drive (:mod:`analysis.plume_force`). Command line::
 
     python -m analysis.reference_set SWEEP_OUT SET_FILE [--only a,b] [--dest data/reference] [--snapshots 2]
 
@@ -27,8 +28,9 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
     collisions by height (:data:`analysis.band_efficiency.COLLISIONS_FILE`), and for runs whose snapshots follow
     the droplets by ident what the return flow lifts off the floor (:data:`analysis.floor_lift.FLOOR_LIFT_FILE`),
     the matte layer over the floor by size (:data:`analysis.floor_layer.FLOOR_LAYER_FILE`) and the droplets of the
-    plume's core, skirt and return flow by height (:data:`analysis.plume_zones.PLUME_ZONES_FILE`), all measured on
-    the run folder.
+    plume's core, skirt and return flow by height (:data:`analysis.plume_zones.PLUME_ZONES_FILE`) and the axis velocity
+    against the Stokes flow they drive (:data:`analysis.plume_force.PLUME_FORCE_FILE`), all measured on the run
+    folder.
     ``snapshots`` is the droplet snapshots each run keeps where its entry in the set has no ``snapshots`` key. Returns
     name -> the stored folder, or -> why it was not stored (not finished)."""
     from analysis.sweep.execution import DONE_FILE, POINTS, point_hash
@@ -84,6 +86,14 @@ def store_set(sweep_out, set_file, dest_root="data/reference", snapshots=2, only
         try:
             if run.family != "kernel":
                 write_plume_zones(folder, results[run.name])
+        except (ValueError, NoData):
+            pass
+        # the axis velocity against the confined Stokes flow the droplets drive, by height (analysis.plume_force)
+        from analysis.plume_force import write_plume_force
+
+        try:
+            if run.family != "kernel":
+                write_plume_force(folder, results[run.name])
         except (ValueError, NoData):
             pass
     return results

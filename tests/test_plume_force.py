@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from analysis.plume_force import (GRAVITY, measure_plume_force, ring_kernel, stokes_axis_velocity)
+from analysis.plume_force import (GRAVITY, measure_plume_force, read_plume_force, ring_kernel, stokes_axis_velocity,
+                                  write_plume_force)
 from popbal.closures import confined_axis_coefficient
 from popbal.model import column_radius
 from settler.cases import load_case
@@ -91,8 +92,8 @@ def test_a_constructed_plume_is_measured_band_by_band(tmp_path):
     """One snapshot of the demo (100 mm high, 5 mm cells): 300 droplets on a ring
     of 10 mm in the band 40-50 mm and 300 at 2-3 mm in the band 50-60 mm, the measured axis velocity there 30 and 20
     mm/s. u_K in each band is the ring kernel's sum (the inner ones regularised at half a cell where closer); the
-    middle ratio is the mean velocity over the mean u_K of bands 4-7; loads are the droplets' volume over 10 mm; a
-    profile without the snapshot's time is refused by name."""
+    middle ratio is the mean velocity over the mean u_K of bands 4-7; loads are the droplets' volume over 10 mm; the
+    stored table round-trips; a profile without the snapshot's time is refused by name."""
     rng = np.random.default_rng(7)
     d = 5e-4
     volume = math.pi / 6.0 * d**3
@@ -121,6 +122,10 @@ def test_a_constructed_plume_is_measured_band_by_band(tmp_path):
     assert table["load"].iloc[4] == pytest.approx(300 * volume / 0.01, rel=1e-12)
     assert table.drop(index=[4, 5])["stokes_axis_velocity"].abs().sum() == 0.0
     assert meta["middle_ratio"] == pytest.approx(0.05 / (ring + inner), rel=1e-9)
+    back, back_meta = read_plume_force(write_plume_force(folder, tmp_path, (15.0, 20.0)))
+    assert back_meta["window"] == (15.0, 20.0) and back_meta["snapshots"] == [20.0]
+    assert np.allclose(back.to_numpy(), table.to_numpy(), rtol=1e-6)
+    assert back_meta["middle_ratio"] == pytest.approx(meta["middle_ratio"], rel=1e-6)
     write_table([{"time": 21.0, "z": c, "channel_radius": math.nan, "channel_velocity": 0.0, "droplet_volume": 0.0}
                  for c in centres], CHANNEL_PROFILE, folder / "channel_profile.csv")
     with pytest.raises(ValueError, match="channel_profile.csv: no row at the snapshot time 20 s"):
