@@ -8,27 +8,34 @@ drives the slag on the axis down at
 
     w0 = F K(r / R) / (4 pi mu),    K = 2 ln(R / r) - 2 + 2 (r / R)^2
 
-(:func:`ring_kernel`; the slag between the axis and the ring moves as a plug, the pressure gradient that keeps the
-flux zero pushes back; K < 0 beyond r / R = 0.45: droplets in the outer slag hold the axis back). A uniform core of
-radius a averages K to A0 = 2 ln(R / a) - 1 + (a / R)^2 (popbal.closures.confined_axis_coefficient), the
-confined plume law popbal's channel takes. So a band's droplets, wherever they are, predict the axis velocity
+(:func:`ring_kernel`; the pressure gradient that keeps the flux zero pushes back, so K < 0 beyond r / R = 0.451:
+droplets in the outer slag hold the axis back). A uniform core of radius a averages K to A0 = 2 ln(R / a) - 1 +
+(a / R)^2 (popbal.closures.confined_axis_coefficient), the confined plume law popbal's channel takes. The full
+engine does not put a droplet's force on a line: it spreads it over a Gaussian of width sigma = max(sigma_cells h,
+sigma_diameter d) around the droplet (``fulldem.sigma_cells``, ``fulldem.sigma_diameter``, h the cell), whose
+average of K is
 
-    u_K = drho g / (4 pi mu dz) sum_i V_i K(max(r_i, h / 2) / R)   (:func:`stokes_axis_velocity`),
+    K_sigma(r) = 2 ln(R / r) - E1(r^2 / (2 sigma^2)) - 2 + 2 (r^2 + 2 sigma^2) / R^2
 
-r regularised at half the engine's cell h, over which the full engine spreads each droplet's force (a droplet at the
-axis drives a cell, not a line; droplets beyond R, in the box's corners, count as at R, K = 0).
+(:func:`smoothed_ring_kernel`; E1 the exponential integral; finite on the axis, 2 ln(R / sigma) - ln 2 + gamma - 2 +
+4 sigma^2 / R^2; the Gaussian's tail beyond the wall neglected). So a band's droplets, wherever they are, predict the
+axis velocity
+
+    u_K = drho g / (4 pi mu dz) sum_i V_i K_sigma_i(r_i)   (:func:`stokes_axis_velocity`).
+
 :func:`measure_plume_force` takes it over a run's steady window (each droplet snapshot, each of
 :data:`settler.output.PROFILE_BANDS` bands) beside the measured axis velocity (``channel_profile.csv``) and the load
 per height; :func:`write_plume_force` stores the table beside a reference run (:data:`PLUME_FORCE_FILE`, written by
-``python -m analysis.reference_set``). It neglects the slag's inertia (the plume's Reynolds number reaches 10-20 in the demo's and the paper's
-cases), the column's finite height (the top and bottom bands, where the flow turns) and the droplets' own
-acceleration.
+``python -m analysis.reference_set``). It neglects the slag's inertia (the plume's Reynolds number reaches 10-20 in
+the demo's and the paper's cases), the column's finite height (the top and bottom bands, where the flow turns), the
+droplets' own acceleration and the box's corners (droplets beyond R count as at R).
 
-What it measures (2026-12-06, the remade training runs' run folders, their last 12 snapshots in the steady window;
-docs/guide/reduced-model.md): over the middle four bands u / u_K = 0.65-0.86 in the demo's feed, viscosity and grid
-families, 0.85 in the coalescence-off demo, 0.77 / 0.75 in simple / cubic, 0.65 / 0.77 in deep's 50 / 150 mm
-columns: one factor of about 0.77 whether the plume is compact or spread, where the half load within the half-volume
-radius (the line-force law) gave 0.77-1.68.
+What it measures (2026-12-06, the remade training runs' folders, every snapshot in the steady window;
+docs/guide/reduced-model.md): over the middle four bands u / u_K = 0.93 / 0.91 / 0.81 / 0.87 / 0.72 in the demo's
+2.5 mm viscosity-double, feed-half, cell_25, feed-double and viscosity-half runs (plume Reynolds number 1.3-13), 0.91
+without coalescence, 0.85 / 0.89 / 0.81 for the demo at 5 / 3.3 / 2.5 mm cells, 0.79 / 0.78 in simple / cubic (Re
+about 20), 1.10-1.15 in deep's 50 and 150 mm columns (Re below 1): near one where the slag's inertia is small,
+falling as it grows, for compact and spread plumes alike.
 """
 
 from __future__ import annotations
@@ -39,10 +46,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from settler.physics.constants import STANDARD_GRAVITY as GRAVITY
+
+from .plume_zones import axis_window, band_value, snapshot_rows, write_window_table
+
 #: The stored table's name beside a reference run.
 PLUME_FORCE_FILE = "plume_force.csv"
-#: The standard gravity [m/s^2] of the engine (settler.physics).
-GRAVITY = 9.80665
+#: Euler's constant gamma, in the smoothed kernel's value on the axis.
+EULER_GAMMA = 0.5772156649015329
 #: Its columns: name -> (unit, meaning).
 PLUME_FORCE_UNITS = {
     "z": ("m", "height of the band's centre above the bottom"),
@@ -57,32 +68,62 @@ MIDDLE_BANDS = slice(3, 7)
 def ring_kernel(radius, column_radius: float):
     """K(r / R) = 2 ln(R / r) - 2 + 2 (r / R)^2 [-] of a ring force at ``radius`` r [m] in a closed column of
     ``column_radius`` R [m]: the axis velocity over F / (4 pi mu) (module docstring). r is taken as at most R (K(R) =
-    0) and must be positive."""
+    0) and must be positive: a ring on the axis is a line force, whose axis velocity is infinite."""
+    _check_positive("column_radius", column_radius, "m")
     r = np.minimum(np.asarray(radius, dtype=float), column_radius)
-    if np.any(r <= 0.0):
-        raise ValueError("ring_kernel: a ring at r <= 0 is a line force on the axis, whose velocity is infinite; "
-                         "regularise r (stokes_axis_velocity takes min_radius)")
+    if not np.all(r > 0.0):
+        bad = float(r[~(r > 0.0)].flat[0])
+        raise ValueError(f"ring_kernel: radius = {bad!r} m; allowed a distance > 0 from the axis (a ring on the axis "
+                         "is a line force, whose axis velocity is infinite: smoothed_ring_kernel spreads it)")
     x = r / column_radius
     return 2.0 * np.log(1.0 / x) - 2.0 + 2.0 * x * x
 
 
+def smoothed_ring_kernel(radius, column_radius: float, width):
+    """K_sigma(r) [-]: :func:`ring_kernel` averaged over a Gaussian of ``width`` sigma [m] (scalar or per ring) around
+    a point force at ``radius`` r [m] (module docstring), as the full engine spreads each droplet's force; r taken as
+    at most R, r = 0 allowed."""
+    from scipy.special import exp1
+
+    _check_positive("column_radius", column_radius, "m")
+    r = np.minimum(np.asarray(radius, dtype=float), column_radius)
+    sigma = np.broadcast_to(np.asarray(width, dtype=float), r.shape)
+    if not (np.all(r >= 0.0) and np.all(sigma > 0.0)):
+        raise ValueError("smoothed_ring_kernel: allowed radius >= 0 and width > 0 [m]; got radius min "
+                         f"{float(np.min(r))!r}, width min {float(np.min(sigma))!r}")
+    x = r * r / (2.0 * sigma * sigma)
+    # -2 ln r - E1(x) = -ln(2 sigma^2) + gamma - Ein(x), Ein(x) = E1(x) + gamma + ln x, x - x^2/4 near 0
+    with np.errstate(divide="ignore"):
+        ein = np.where(x > 1e-6, exp1(np.maximum(x, 1e-300)) + EULER_GAMMA + np.log(np.maximum(x, 1e-300)),
+                       x - 0.25 * x * x)
+    log_part = 2.0 * math.log(column_radius) - np.log(2.0 * sigma * sigma) + EULER_GAMMA - ein
+    return log_part - 2.0 + 2.0 * (r * r + 2.0 * sigma * sigma) / column_radius**2
+
+
 def stokes_axis_velocity(radius, volume, band_height: float, column_radius: float, viscosity: float,
-                         density_difference: float, min_radius: float) -> float:
+                         density_difference: float, width) -> float:
     """u_K [m/s, downward] of droplets of ``volume`` [m^3] at ``radius`` [m] from the axis in a band of
-    ``band_height`` dz [m] (module docstring), the slag's ``viscosity`` mu [Pa s], ``density_difference`` drho
-    [kg/m^3] and each r taken as at least ``min_radius`` [m] (> 0)."""
-    if not min_radius > 0.0:
-        raise ValueError(f"stokes_axis_velocity: min_radius = {min_radius!r}; allowed a length > 0 [m]")
-    r = np.maximum(np.asarray(radius, dtype=float), min_radius)
+    ``band_height`` dz [m] (module docstring), the slag's ``viscosity`` mu [Pa s] and ``density_difference`` drho
+    [kg/m^3], each droplet's force spread over a Gaussian of ``width`` [m] (scalar or per droplet;
+    :func:`smoothed_ring_kernel`)."""
+    for name, value, unit in (("band_height", band_height, "m"), ("viscosity", viscosity, "Pa s")):
+        _check_positive(name, value, unit)
     force = density_difference * GRAVITY * np.asarray(volume, dtype=float) / band_height
-    return float(np.sum(force * ring_kernel(r, column_radius)) / (4.0 * math.pi * viscosity))
+    return float(np.sum(force * smoothed_ring_kernel(radius, column_radius, width)) / (4.0 * math.pi * viscosity))
+
+
+def _check_positive(name: str, value, unit: str) -> None:
+    if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} = {value!r}; allowed a finite number > 0 [{unit}]")
 
 
 def force_table(snapshots, channel: pd.DataFrame, height: float, axis: tuple[float, float], column_radius: float,
-                viscosity: float, density_difference: float, cell: float, bands: int | None = None) -> pd.DataFrame:
+                viscosity: float, density_difference: float, smoothing: tuple[float, float],
+                bands: int | None = None) -> pd.DataFrame:
     """The table of :data:`PLUME_FORCE_UNITS` from ``snapshots`` [(time [s], droplets DataFrame with x, y, z [m],
-    diameter [m])] and the run's ``channel`` profile, the inlet ``axis`` (x, y) [m] and the engine's ``cell`` [m]
-    (r regularised at cell / 2), in the profile's bands over ``height`` [m]. ValueError naming the file where a
+    diameter [m])] and the run's ``channel`` profile, the inlet ``axis`` (x, y) [m] and the engine's ``smoothing``
+    (sigma_min [m], sigma per diameter [-]: each droplet's force spread over a Gaussian of width max(sigma_min,
+    sigma per diameter x d)), in the profile's bands over ``height`` [m]. ValueError naming the file where a
     snapshot's time, or a band at it, has no profile row."""
     from settler.output import PROFILE_BANDS, band_edges
 
@@ -91,73 +132,54 @@ def force_table(snapshots, channel: pd.DataFrame, height: float, axis: tuple[flo
     dz = edges[1] - edges[0]
     sums = {name: np.zeros(count) for name in ("axis_velocity", "stokes_axis_velocity", "load")}
     for time, frame in snapshots:
-        rows = channel[np.isclose(channel["time"], time, rtol=0.0, atol=1e-6)]
-        if rows.empty:
-            raise ValueError(f"channel_profile.csv: no row at the snapshot time {time:g} s (written at every snapshot "
-                             "by the full engine)")
+        rows = snapshot_rows(channel, "channel_profile.csv", time)
         z = frame["z"].to_numpy(dtype=float)
         r = np.hypot(frame["x"].to_numpy(dtype=float) - axis[0], frame["y"].to_numpy(dtype=float) - axis[1])
-        volume = np.pi / 6.0 * frame["diameter"].to_numpy(dtype=float) ** 3
+        diameter = frame["diameter"].to_numpy(dtype=float)
+        volume = np.pi / 6.0 * diameter**3
+        width = np.maximum(smoothing[0], smoothing[1] * diameter)
         for b, (low, high) in enumerate(zip(edges[:-1], edges[1:])):
             centre = 0.5 * (low + high)
-            u = rows.loc[np.isclose(rows["z"], centre, rtol=1e-9, atol=1e-12), "channel_velocity"]
-            if u.empty:
-                raise ValueError(f"channel_profile.csv: no row at {time:g} s for the band centred at z = {centre:g} m "
-                                 f"(the profile's bands differ from {count} equal bands of the height)")
+            sums["axis_velocity"][b] += band_value(rows, "channel_profile.csv", "channel_velocity", time, centre, count)
             inside = (z >= low) & (z < high)
-            sums["axis_velocity"][b] += float(u.iloc[0])
             sums["load"][b] += float(volume[inside].sum()) / dz
             sums["stokes_axis_velocity"][b] += stokes_axis_velocity(r[inside], volume[inside], dz, column_radius,
-                                                                    viscosity, density_difference, 0.5 * cell)
+                                                                    viscosity, density_difference, width[inside])
     n = len(snapshots)
     return pd.DataFrame({"z": 0.5 * (edges[:-1] + edges[1:]), **{k: v / n for k, v in sums.items()}})
 
 
+def middle_ratio(table: pd.DataFrame) -> float:
+    """The measured axis velocity over u_K, their means over :data:`MIDDLE_BANDS` [-] (NaN where u_K is 0 there)."""
+    middle = table.iloc[MIDDLE_BANDS]
+    stokes = float(middle["stokes_axis_velocity"].mean())
+    return float(middle["axis_velocity"].mean()) / stokes if stokes != 0.0 else math.nan
+
+
 def measure_plume_force(run, window: tuple[float, float] | None = None) -> tuple[pd.DataFrame, dict]:
     """(table, meta) of a full run folder or :class:`analysis.Run` over ``window`` (default: its steady window, else
-    its last third): :func:`force_table` of its droplet snapshots there; meta {"window", "snapshots", "feed"
-    (the matte feed [m^3/s]), "middle_ratio" (mean axis velocity over mean u_K in :data:`MIDDLE_BANDS`)}. ValueError
+    its last third): :func:`force_table` of its droplet snapshots there, at the case's fulldem smoothing; meta
+    {"window", "snapshots", "feed" (the matte feed [m^3/s]), "middle_ratio" (:func:`middle_ratio`)}. ValueError
     where the window holds no droplet snapshot, the run lacks its channel profile, or its inlet is a slot."""
     from popbal.model import column_radius
     from settler.output import read_table
 
-    from .runs import load_run
-    from .steady import window_snapshots
-
-    run = run if hasattr(run, "timeseries") else load_run(run)
+    run, window, times, folder = axis_window(run, window, ("channel_profile.csv",), "the axis velocity is measured")
     case = run.case
-    if case.inlet_is_slot:
-        raise ValueError(f"{run.folder}: a slot inlet feeds a row of plumes; the axis velocity is measured on one "
-                         "inlet axis (a disk inlet)")
-    window, times = window_snapshots(run, window)
-    if not times:
-        raise ValueError(f"no droplet snapshot within {window[0]:g}-{window[1]:g} s (a stored reference keeps few; "
-                         "give the run folder or another window)")
-    folder = Path(run.folder)
-    if not (folder / "channel_profile.csv").is_file():
-        raise ValueError(f"{folder}: no channel_profile.csv (the full engine's channel measures)")
+    fd = case.fulldem
     table = force_table([run.droplets(t) for t in times], read_table(folder / "channel_profile.csv"),
                         case.geometry.height, tuple(case.inlet_center), column_radius(case), case.slag_viscosity,
-                        case.matte.density - case.slag.density, case.fulldem.cell_size)
-    middle = table.iloc[MIDDLE_BANDS]
+                        case.matte.density - case.slag.density, (fd.sigma_cells * fd.cell_size, fd.sigma_diameter))
     meta = {"window": (float(window[0]), float(window[1])), "snapshots": list(times),
-            "feed": case.feed.mass_rate / case.matte.density,
-            "middle_ratio": float(middle["axis_velocity"].mean() / middle["stokes_axis_velocity"].mean())}
+            "feed": case.feed.mass_rate / case.matte.density, "middle_ratio": middle_ratio(table)}
     return table, meta
 
 
 def write_plume_force(run_folder, dest, window: tuple[float, float] | None = None) -> Path:
     """Measure ``run_folder`` over ``window`` (:func:`measure_plume_force`) and write :data:`PLUME_FORCE_FILE` into
     ``dest`` atomically, the window and the snapshots in its header."""
-    from settler.output import atomic_write_text, units_line
-
-    from .files import window_header
-
     table, meta = measure_plume_force(run_folder, window)
-    header = units_line(PLUME_FORCE_UNITS) + window_header(meta["window"], meta["snapshots"], {})
-    path = Path(dest) / PLUME_FORCE_FILE
-    atomic_write_text(path, header + table.to_csv(index=False, float_format="%.7g"))
-    return path
+    return write_window_table(Path(dest) / PLUME_FORCE_FILE, PLUME_FORCE_UNITS, table, meta)
 
 
 def read_plume_force(path) -> tuple[pd.DataFrame, dict]:
@@ -166,9 +188,7 @@ def read_plume_force(path) -> tuple[pd.DataFrame, dict]:
 
     fields = read_window_header(path)
     table = pd.read_csv(path, comment="#")
-    middle = table.iloc[MIDDLE_BANDS]
-    return table, {"window": fields["window"], "snapshots": fields["snapshots"],
-                   "middle_ratio": float(middle["axis_velocity"].mean() / middle["stokes_axis_velocity"].mean())}
+    return table, {"window": fields["window"], "snapshots": fields["snapshots"], "middle_ratio": middle_ratio(table)}
 
 
 def _report(folder, table, meta) -> None:

@@ -63,6 +63,58 @@ def split_band(r, volume, down, core_radius: float, return_radius: float) -> dic
     return {part: (float(volume[m].sum()), float((volume[m] * down[m]).sum())) for part, m in masks.items()}
 
 
+def snapshot_rows(profile: pd.DataFrame, name: str, time: float) -> pd.DataFrame:
+    """The rows of a run's height profile ``name`` (``channel_profile.csv``, ``zone_profile.csv``) at a snapshot's
+    ``time`` [s]; ValueError naming the file where it has none."""
+    rows = profile[np.isclose(profile["time"], time, rtol=0.0, atol=1e-6)]
+    if rows.empty:
+        raise ValueError(f"{name}: no row at the snapshot time {time:g} s (written at every snapshot by the full engine)")
+    return rows
+
+
+def band_value(rows: pd.DataFrame, name: str, column: str, time: float, centre: float, bands: int) -> float:
+    """``column`` of the profile ``rows`` (:func:`snapshot_rows`) in the band centred at ``centre`` [m]; ValueError
+    naming the file where the profile has no such band (its bands differ from ``bands`` equal bands)."""
+    value = rows.loc[np.isclose(rows["z"], centre, rtol=1e-9, atol=1e-12), column]
+    if value.empty:
+        raise ValueError(f"{name}: no row at {time:g} s for the band centred at z = {centre:g} m (the profiles' bands "
+                         f"differ from {bands} equal bands of the height)")
+    return float(value.iloc[0])
+
+
+def axis_window(run, window, files, what: str):
+    """(run, window, snapshot times, folder) of a full run folder or :class:`analysis.Run` for a measure around its
+    inlet axis over ``window`` (default: its steady window, else its last third). ValueError where its inlet is a
+    slot (``what`` says what is measured around one axis), the window holds no droplet snapshot or the run lacks one
+    of ``files``."""
+    from .runs import load_run
+    from .steady import window_snapshots
+
+    run = run if hasattr(run, "timeseries") else load_run(run)
+    if run.case.inlet_is_slot:
+        raise ValueError(f"{run.folder}: a slot inlet feeds a row of plumes; {what} around one inlet axis (a disk "
+                         "inlet)")
+    window, times = window_snapshots(run, window)
+    if not times:
+        raise ValueError(f"no droplet snapshot within {window[0]:g}-{window[1]:g} s (a stored reference keeps few; "
+                         "give the run folder or another window)")
+    folder = Path(run.folder)
+    missing = [n for n in files if not (folder / n).is_file()]
+    if missing:
+        raise ValueError(f"{folder}: no {', '.join(missing)} (the full engine's zone diagnostics)")
+    return run, window, times, folder
+
+
+def write_window_table(path: Path, units: dict, table: pd.DataFrame, meta: dict) -> Path:
+    """Write a measure's ``table`` to ``path`` atomically: its units line, the window and the snapshots of ``meta``
+    in the header, numbers to float32's 7 digits."""
+    from settler.output import atomic_write_text, units_line
+
+    header = units_line(units) + window_header(meta["window"], meta["snapshots"], {})
+    atomic_write_text(path, header + table.to_csv(index=False, float_format="%.7g"))
+    return path
+
+
 def zone_table(snapshots, channel: pd.DataFrame, zones: pd.DataFrame, height: float, axis: tuple[float, float],
                bands: int | None = None) -> pd.DataFrame:
     """The table of :data:`PLUME_ZONES_UNITS` from ``snapshots`` [(time [s], droplets DataFrame with x, y, z [m],
@@ -75,12 +127,8 @@ def zone_table(snapshots, channel: pd.DataFrame, zones: pd.DataFrame, height: fl
     sums = {part: np.zeros((len(edges) - 1, 2)) for part in PARTS}
     axis_sum = np.zeros(len(edges) - 1)
     for time, frame in snapshots:
-        rows_c = channel[np.isclose(channel["time"], time, rtol=0.0, atol=1e-6)]
-        rows_z = zones[np.isclose(zones["time"], time, rtol=0.0, atol=1e-6)]
-        for name, rows in (("channel_profile.csv", rows_c), ("zone_profile.csv", rows_z)):
-            if rows.empty:
-                raise ValueError(f"{name}: no row at the snapshot time {time:g} s (written at every snapshot by the "
-                                 "full engine)")
+        rows_c = snapshot_rows(channel, "channel_profile.csv", time)
+        rows_z = snapshot_rows(zones, "zone_profile.csv", time)
         z = frame["z"].to_numpy(dtype=float)
         r = np.hypot(frame["x"].to_numpy(dtype=float) - axis[0], frame["y"].to_numpy(dtype=float) - axis[1])
         volume = np.pi / 6.0 * frame["diameter"].to_numpy(dtype=float) ** 3
@@ -88,17 +136,12 @@ def zone_table(snapshots, channel: pd.DataFrame, zones: pd.DataFrame, height: fl
         for b, (low, high) in enumerate(zip(edges[:-1], edges[1:])):
             inside = (z >= low) & (z < high)
             centre = 0.5 * (low + high)
-            r0 = rows_z.loc[np.isclose(rows_z["z"], centre, rtol=1e-9, atol=1e-12), "return_radius"]
-            u = rows_c.loc[np.isclose(rows_c["z"], centre, rtol=1e-9, atol=1e-12), "channel_velocity"]
-            for name, column in (("zone_profile.csv", r0), ("channel_profile.csv", u)):
-                if column.empty:
-                    raise ValueError(f"{name}: no row at {time:g} s for the band centred at z = {centre:g} m (the "
-                                     f"profiles' bands differ from {len(edges) - 1} equal bands of the height)")
-            axis_sum[b] += float(u.iloc[0])
+            r0 = band_value(rows_z, "zone_profile.csv", "return_radius", time, centre, len(edges) - 1)
+            axis_sum[b] += band_value(rows_c, "channel_profile.csv", "channel_velocity", time, centre, len(edges) - 1)
             if not inside.any():
                 continue
             a = half_volume_radius(r[inside], volume[inside])
-            split = split_band(r[inside], volume[inside], down[inside], a, float(r0.iloc[0]))
+            split = split_band(r[inside], volume[inside], down[inside], a, r0)
             for part in PARTS:
                 sums[part][b] += split[part]
     count, dz = len(snapshots), edges[1] - edges[0]
@@ -118,21 +161,8 @@ def measure_plume_zones(run, window: tuple[float, float] | None = None) -> tuple
     plumes, not one axis)."""
     from settler.output import read_table
 
-    from .runs import load_run
-    from .steady import window_snapshots
-
-    run = run if hasattr(run, "timeseries") else load_run(run)
-    if run.case.inlet_is_slot:
-        raise ValueError(f"{run.folder}: a slot inlet feeds a row of plumes; the core, skirt and return flow are "
-                         "measured around one inlet axis (a disk inlet)")
-    window, times = window_snapshots(run, window)
-    if not times:
-        raise ValueError(f"no droplet snapshot within {window[0]:g}-{window[1]:g} s (a stored reference keeps few; "
-                         "give the run folder or another window)")
-    folder = Path(run.folder)
-    missing = [n for n in ("channel_profile.csv", "zone_profile.csv") if not (folder / n).is_file()]
-    if missing:
-        raise ValueError(f"{folder}: no {', '.join(missing)} (the full engine's zone diagnostics)")
+    run, window, times, folder = axis_window(run, window, ("channel_profile.csv", "zone_profile.csv"),
+                                             "the core, skirt and return flow are measured")
     table = zone_table([run.droplets(t) for t in times], read_table(folder / "channel_profile.csv"),
                        read_table(folder / "zone_profile.csv"), run.case.geometry.height, tuple(run.case.inlet_center))
     return table, {"window": (float(window[0]), float(window[1])), "snapshots": list(times)}
@@ -141,13 +171,8 @@ def measure_plume_zones(run, window: tuple[float, float] | None = None) -> tuple
 def write_plume_zones(run_folder, dest, window: tuple[float, float] | None = None) -> Path:
     """Measure ``run_folder`` over ``window`` (:func:`measure_plume_zones`) and write :data:`PLUME_ZONES_FILE` into
     ``dest`` atomically, the window and the snapshots in its header."""
-    from settler.output import atomic_write_text, units_line
-
     table, meta = measure_plume_zones(run_folder, window)
-    header = units_line(PLUME_ZONES_UNITS) + window_header(meta["window"], meta["snapshots"], {})
-    path = Path(dest) / PLUME_ZONES_FILE
-    atomic_write_text(path, header + table.to_csv(index=False, float_format="%.7g"))
-    return path
+    return write_window_table(Path(dest) / PLUME_ZONES_FILE, PLUME_ZONES_UNITS, table, meta)
 
 
 def read_plume_zones(path) -> tuple[pd.DataFrame, dict]:
