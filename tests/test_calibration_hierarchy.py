@@ -680,9 +680,9 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
     from analysis.calibration.registry import Registry
     from popbal.model import channel_closure
     from settler.cases import NO_CALIBRATION, load_case
+    from tests.test_floor_layer import REMADE as reference
     from tests.test_floor_layer import _stored_layer
 
-    reference = Path(__file__).parents[1] / "data/reference_remake"
     for run, source, thickness in (("a", "demo_cell_25", 4e-3), ("b", "demo_feed_half_fine", 3e-3),
                                    ("off", "demo_no_coalescence_fine", 1e-3), ("kernel", "demo_cell_25", 1e-3)):
         _stored_layer(tmp_path / run, thickness, reference / source / "case.toml")
