@@ -48,7 +48,7 @@ import pandas as pd
 
 from settler.physics.constants import STANDARD_GRAVITY as GRAVITY
 
-from .plume_zones import axis_window, band_value, snapshot_rows, write_window_table
+from .plume_zones import axis_window, band_value, read_window_table, snapshot_rows, write_window_table
 
 #: The stored table's name beside a reference run.
 PLUME_FORCE_FILE = "plume_force.csv"
@@ -184,11 +184,8 @@ def write_plume_force(run_folder, dest, window: tuple[float, float] | None = Non
 
 def read_plume_force(path) -> tuple[pd.DataFrame, dict]:
     """The (table, meta) a :func:`write_plume_force` file holds (meta: window, snapshots, middle_ratio)."""
-    from .files import read_window_header
-
-    fields = read_window_header(path)
-    table = pd.read_csv(path, comment="#")
-    return table, {"window": fields["window"], "snapshots": fields["snapshots"], "middle_ratio": middle_ratio(table)}
+    table, meta = read_window_table(path)
+    return table, {**meta, "middle_ratio": middle_ratio(table)}
 
 
 def _report(folder, table, meta) -> None:

@@ -175,10 +175,15 @@ def write_plume_zones(run_folder, dest, window: tuple[float, float] | None = Non
     return write_window_table(Path(dest) / PLUME_ZONES_FILE, PLUME_ZONES_UNITS, table, meta)
 
 
-def read_plume_zones(path) -> tuple[pd.DataFrame, dict]:
-    """The (table, meta) a :func:`write_plume_zones` file holds (meta: window, snapshots)."""
+def read_window_table(path) -> tuple[pd.DataFrame, dict]:
+    """The (table, meta) a :func:`write_window_table` file holds (meta: window, snapshots)."""
     fields = read_window_header(path)
     return pd.read_csv(path, comment="#"), {"window": fields["window"], "snapshots": fields["snapshots"]}
+
+
+def read_plume_zones(path) -> tuple[pd.DataFrame, dict]:
+    """The (table, meta) a :func:`write_plume_zones` file holds (meta: window, snapshots)."""
+    return read_window_table(path)
 
 
 def shares(table: pd.DataFrame) -> pd.DataFrame:
