@@ -134,7 +134,7 @@ SOURCE_TAG = re.compile(r"#.*\[(paper|lit|derived|chosen)\]")
 
 #: Input files of data/: the stored reference runs (data/reference/<case>/case.toml) are outputs, the resolved case of
 #: a run, whose source is the command and commit in their reference.json (the guide's rule for stored runs).
-STORED_RUNS = {"reference", "reference_remake"}  # the stored set and its remake, run by run (data/reference_remake)
+STORED_RUNS = {"reference"}  # the stored set (data/reference)
 DATA_INPUTS = sorted(p for p in Path(DATA_DIR).rglob("*.toml") if not STORED_RUNS & set(p.relative_to(DATA_DIR).parts))
 
 

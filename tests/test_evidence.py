@@ -284,7 +284,8 @@ def test_efficiency_command_prints_a_row_per_run_and_refuses_a_run_without_the_t
     assert main(["--efficiency", str(tmp_path / "demo"), "--cell", "0.01"]) == 0
     row = capsys.readouterr().out.splitlines()[1].split()
     assert row[0] == "demo" and row[2] == "2" and row[3] == "10" and "held" in row
-    bare = tmp_path / "bare"  # a stored run without the merge table (the runs remade since a04ea13 keep one)
-    shutil.copytree("data/reference/demo", bare, ignore=shutil.ignore_patterns("merges_by_height.csv"))
+    bare = tmp_path / "bare"  # a stored run without the merge table nor the collision table made from it
+    shutil.copytree("data/reference/demo", bare,
+                    ignore=shutil.ignore_patterns("merges_by_height.csv", "collisions_by_height.csv"))
     assert main(["--efficiency", str(bare)]) == 2
     assert "no merges_by_height.csv" in capsys.readouterr().err

@@ -98,9 +98,8 @@ def test_a_run_folders_floor_layer_is_measured_stored_and_read_back(tmp_path):
     assert read["window"] == (20.0, 22.0) and read["thickness"] == pytest.approx(meta["thickness"], rel=1e-6)
 
 
-#: The remade reference runs: data/reference_remake until the remade set replaces data/reference.
-REMADE = next(p for p in (Path(__file__).parents[1] / "data" / name for name in ("reference_remake", "reference"))
-              if (p / "demo_no_coalescence_fine" / "case.toml").is_file())
+#: The stored reference runs (the set made at a04ea13, data/reference/README.md).
+REMADE = Path(__file__).parents[1] / "data" / "reference"
 DEMO_CASE = REMADE / "demo_cell_25/case.toml"
 
 

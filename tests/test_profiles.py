@@ -15,9 +15,8 @@ from analysis import load_run
 from analysis.profiles import band_profile, profile_comparison
 from settler.cli import main
 
-#: A stored full run of the demo case with both height tables (the remade set; data/reference once it replaces it).
-FULL = next(p for p in (Path("data/reference_remake/demo"), Path("data/reference/demo"))
-            if (p / "merges_by_height.csv").is_file())
+#: A stored full run of the demo case with both height tables.
+FULL = Path("data/reference/demo")
 WINDOW = (16.0, 25.0)
 
 

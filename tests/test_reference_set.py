@@ -18,19 +18,15 @@ import pytest
 from analysis import load_run
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The stored set, and the set being regenerated beside it (data/reference_remake/README.md): each run of the remake
-#: is stored there as soon as it finishes, so that no run is lost with the machine that made it, and is held to the
-#: same evidence rules and to its own engine (its engines.toml) until the whole remake replaces data/reference.
-SETS = [folder for folder in (ROOT / "data" / "reference", ROOT / "data" / "reference_remake")
-        if (folder / "engines.toml").is_file()]
-STORED = sorted((p.parent for s in SETS for p in s.glob("*/reference.json")), key=lambda p: (p.parent.name, p.name))
+#: The stored set (data/reference/README.md), held to its engine (data/reference/engines.toml).
+SETS = [ROOT / "data" / "reference"]
+STORED = sorted(p.parent for s in SETS for p in s.glob("*/reference.json"))
 
 
 def _run_id(folder: Path) -> str:
-    """A stored run's test id: its name, and its set's where it is not data/reference (a remade run of one name)."""
-    return folder.name if folder.parent.name == "reference" else f"{folder.parent.name}/{folder.name}"
-#: Runs made by an older engine, kept until their regeneration is stored (data/reference/README.md lists them).
-AWAITING_REGENERATION: set[str] = set()
+    return folder.name
+
+
 #: Strings that would name a machine's folders.
 MACHINE_PATHS = re.compile(r"(^|[\s'\"=])/(work|home|tmp|root|Users|mnt|scratch)/")
 #: Relative mass-accounting error allowed in a stored run's time series [-] (the engine holds it to round-off).
@@ -50,7 +46,7 @@ def test_a_stored_run_loads_and_conserves_matte(folder):
     assert np.nanmax(np.abs(run.timeseries["mass_balance_error"])) < MASS_TOLERANCE
 
 
-@pytest.mark.parametrize("folder", [f for f in STORED if f.name not in AWAITING_REGENERATION], ids=_run_id)
+@pytest.mark.parametrize("folder", STORED, ids=_run_id)
 def test_provenance_names_command_commit_seed_and_a_clean_tree(folder):
     info = _info(folder)
     assert info["command"] == ("settler sweep --set data/reference/design.toml --engine full --only " + folder.name)
@@ -96,8 +92,6 @@ def test_every_regenerated_run_ran_one_engine(set_folder):
     runs = [f for f in STORED if f.parent == set_folder]
     assert runs, f"{set_folder.name}: an engines.toml and no stored run"
     for folder in runs:
-        if folder.name in AWAITING_REGENERATION:
-            continue
         trees = _info(folder)["engine_trees"]
         if trees == {k: the_set[k] for k in keys}:
             on_set += 1
@@ -105,7 +99,7 @@ def test_every_regenerated_run_ran_one_engine(set_folder):
         match = [e for e in equivalents if trees == {k: e[k] for k in keys}]
         assert match, f"{folder.name}: engine trees {trees} are neither the set's nor a listed equivalent"
         assert folder.name in match[0]["runs"], f"{folder.name}: not among the runs of its engine change"
-    assert on_set >= min(3, len(runs))  # the remake's first runs: every one on its engine
+    assert on_set >= 1  # an equivalent engine is an exception for named runs, never the set's engine
     for e in equivalents:
         assert re.fullmatch(r"[0-9a-f]{40}", e["commit"]) and e["change"] and "analysis.identity" in e["check"]
         assert "the same run bit for bit" in e["check"]
@@ -117,7 +111,7 @@ STORAGE_LIMIT = 40_000_000
 
 @pytest.mark.parametrize("folder", SETS, ids=lambda p: p.name)
 def test_the_reference_set_stays_within_its_storage_budget(folder):
-    """Each set within the budget: the remake is to replace the stored set whole."""
+    """All of data/reference/ within the budget: runs, design, README and the kernel runs' droplet files."""
     total = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
     assert total <= STORAGE_LIMIT, f"data/{folder.name} holds {total / 1e6:.2f} MB, over {STORAGE_LIMIT / 1e6:g} MB"
 
