@@ -407,6 +407,7 @@ display(Markdown("\n\n".join(said)))
 # is read as committed (quick or not): the whole hierarchy takes about 47 minutes on 2 cores. No preset applies it.
 
 # %%
+from analysis.calibration.layer import fitted_set_engine
 from analysis.calibration.targets import TARGET_COLUMNS, load_target, seed_scatter
 
 designed_path = calibration_path("designed")
@@ -447,7 +448,22 @@ errors_designed.style.format({c: "{:+.1f}" for c in TARGET_COLUMNS}).hide(axis="
 seed = seed_scatter(root)
 holdout_runs = [k[len("error_"):] for k in dprov["holdouts"] if k.startswith("error_")
                 and f"band_{k[len('error_'):]}_{list(TARGET_COLUMNS)[0]}" in dprov["holdouts"]]
-if not holdout_runs:
+# The bands are checked against the stored runs only where they are the runs the layer was fitted to: the same set
+# engine (data/reference/engines.toml) at the layer's code commit as now.
+fitted_engine = fitted_set_engine(dprov["code_commit"], DATA_DIR.parent)
+engines_now = root / "engines.toml"
+stored_engine = tomllib.loads(engines_now.read_text()).get("set") if engines_now.is_file() else None
+if holdout_runs and (fitted_engine is None or fitted_engine != stored_engine):
+    recorded = dprov["holdouts"].get("band_coverage", math.nan)
+    print(f"the layer was fitted at {dprov['code_commit'][:10]} to "
+          + ("a reference set that git cannot show here" if fitted_engine is None else
+             f"the reference set of engine fulldem {fitted_engine['fulldem'][:7]}")
+          + "; the stored set is " + ("another" if stored_engine is None else
+                                                f"that of engine fulldem {stored_engine['fulldem'][:7]}")
+          + ": its bands are not compared with today's runs (until the layer is refitted to them). Recorded in the "
+          f"layer against the runs it was fitted to: band coverage {recorded:.3g}")
+    holdout_runs = []
+elif not holdout_runs:
     print("the layer records no hold-out bands (its gate failed, or it was fitted with --band-samples 0)")
 else:
     fig = Figure(figsize=(10, 3.2 * len(holdout_runs) + 0.5), layout="constrained")

@@ -736,3 +736,27 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
     assert layer["popbal"]["bottom_layer_factor"] == pytest.approx(expected, rel=1e-12)
     assert "bottom layer from the floor layers: f_b" in result.summary()
     assert layer["popbal"].get("plume_law") == law and layer["popbal"]["confinement"] is True
+
+
+def test_a_layer_names_the_reference_set_engine_it_was_fitted_to():
+    """fitted_set_engine reads data/reference/engines.toml's [set] at a layer's code commit: the committed layer's
+    set is a real engine (three 40-hex git trees) and a commit git does not know gives None, not an error (the
+    calibration report then leaves its bands unchecked against today's runs)."""
+    import re
+    import shutil
+    import subprocess
+    import tomllib
+    from pathlib import Path
+
+    from analysis.calibration.layer import fitted_set_engine
+
+    root = Path(__file__).resolve().parents[1]
+    shallow = subprocess.run(["git", "-C", str(root), "rev-parse", "--is-shallow-repository"], capture_output=True,
+                             text=True) if shutil.which("git") else None
+    if shallow is None or shallow.stdout.strip() != "false":
+        pytest.skip("no full git history in this checkout")
+    commit = tomllib.loads((root / "data" / "calibration" / "designed.toml").read_text())["provenance"]["code_commit"]
+    engine = fitted_set_engine(commit, root)
+    assert set(engine) == {"fulldem", "popbal", "settler"}
+    assert all(re.fullmatch(r"[0-9a-f]{40}", tree) for tree in engine.values())
+    assert fitted_set_engine("0" * 40, root) is None

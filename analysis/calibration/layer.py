@@ -155,3 +155,25 @@ def write_layer(result: Hierarchy, path, registry_path, command: str = "") -> Pa
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, layer_text(result, registry_path, command))
     return path
+
+
+def fitted_set_engine(code_commit: str, repository: Path) -> dict | None:
+    """The reference set's engine that a layer was fitted to: the ``[set]`` table of ``data/reference/engines.toml``
+    at the layer's recorded ``code_commit``, read with git from ``repository`` (a checkout's root); None where git,
+    the history or that file is not at hand (a shallow clone, an installed package). A layer whose set engine is not
+    the stored set's was fitted to runs that are no longer stored, and its recorded errors and bands are not to be
+    read against today's runs."""
+    import subprocess
+    import tomllib
+
+    try:
+        shown = subprocess.run(["git", "-C", str(repository), "show", f"{code_commit}:data/reference/engines.toml"],
+                               capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if shown.returncode != 0:
+        return None
+    try:
+        return tomllib.loads(shown.stdout).get("set")
+    except tomllib.TOMLDecodeError:
+        return None
