@@ -80,12 +80,13 @@ def design_groups(case) -> dict[str, float]:
             "plume_reynolds": rho_s * w0 * a / mu, "aspect": case.geometry.height / case.geometry.width}
 
 
-def measured_groups(timeseries, case) -> dict[str, float]:
-    """Groups with the run's measured channel: ``channel_radius`` a and ``channel_velocity`` w0 (means over the last
-    third of ``timeseries``, a DataFrame of :data:`settler.output.TIME_SERIES`): ``column_to_channel`` R / a,
-    ``channel_reynolds`` rho_s w0 a / mu and ``sqrt_c`` w0 / sqrt(Q drho g / (pi mu)) [-], with the means
-    ``channel_radius`` [m] and ``channel_velocity`` [m/s]."""
-    late = timeseries[timeseries["time"] >= timeseries["time"].iloc[-1] * 2.0 / 3.0]
+def measured_groups(timeseries, case, window: tuple[float, float] | None = None) -> dict[str, float]:
+    """Groups with the run's measured channel: ``channel_radius`` a and ``channel_velocity`` w0 (means over
+    ``window`` [s], default the last third of ``timeseries``, a DataFrame of :data:`settler.output.TIME_SERIES`):
+    ``column_to_channel`` R / a, ``channel_reynolds`` rho_s w0 a / mu and ``sqrt_c`` w0 / sqrt(Q drho g / (pi mu))
+    [-], with the means ``channel_radius`` [m] and ``channel_velocity`` [m/s]."""
+    start, end = window if window is not None else (timeseries["time"].iloc[-1] * 2.0 / 3.0, math.inf)
+    late = timeseries[(timeseries["time"] >= start) & (timeseries["time"] <= end)]
     a = float(late["channel_radius"].mean())
     w0 = float(late["channel_velocity"].mean())
     mu, rho_s, rho_m = case.slag_viscosity, case.slag.density, case.matte.density
@@ -116,5 +117,108 @@ def design_table(path) -> str:
     return "\n".join(lines)
 
 
+#: The measured table's columns: (heading, key, format, scale to the heading's unit).
+MEASURED_COLUMNS = (("window [s]", "window", "", 1.0), ("a [mm]", "channel_radius", ".3g", 1e3),
+                    ("w0 [mm/s]", "channel_velocity", ".3g", 1e3), ("R/a", "column_to_channel", ".3g", 1.0),
+                    ("Re_p", "channel_reynolds", ".2g", 1.0), ("sqrt(c)", "sqrt_c", ".2f", 1.0),
+                    ("w0/u_K", "stokes_ratio", ".2f", 1.0), ("delta_b [mm]", "floor_thickness", ".3g", 1e3),
+                    ("delta_b/a", "floor_to_channel", ".2f", 1.0))
+
+
+def stored_measured_groups(folder) -> dict:
+    """The measured groups of a stored reference run (``data/reference/<name>/``) over its steady window (else its
+    last third; :func:`analysis.steady.window_of`): :func:`measured_groups`, and where the run keeps them
+    ``stokes_ratio`` w0 / u_K (the axis velocity over the confined Stokes flow its droplets drive, middle bands,
+    ``plume_force.csv``; :mod:`analysis.plume_force`), ``floor_thickness`` delta_b [m] (the excess thickness of the
+    matte layer over the floor, ``floor_layer.csv``; :mod:`analysis.floor_layer`) and ``floor_to_channel`` delta_b / a
+    [-]; ``window`` (start, end) [s] and ``steady``."""
+    from pathlib import Path
+
+    from analysis.floor_layer import read_floor_layer
+    from analysis.plume_force import middle_ratio, read_plume_force
+    from analysis.runs import load_run
+    from analysis.steady import window_of
+    from settler.cases import load_case
+
+    folder = Path(folder)
+    run = load_run(folder)
+    window, steady = window_of(run.timeseries)
+    case = load_case(folder / "case.toml")
+    out: dict = {"window": window, "steady": steady}
+    if case.inlet_is_slot or case.feed.mass_rate <= 0.0:  # no single plume: its groups mean nothing
+        return out
+    out.update(measured_groups(run.timeseries, case, window))
+    if (folder / "plume_force.csv").is_file():
+        out["stokes_ratio"] = middle_ratio(read_plume_force(folder / "plume_force.csv")[0])
+    if (folder / "floor_layer.csv").is_file():
+        out["floor_thickness"] = read_floor_layer(folder / "floor_layer.csv")[1]["thickness"]
+        out["floor_to_channel"] = out["floor_thickness"] / out["channel_radius"]
+    return out
+
+
+def measured_table(reference_dir, holdouts=None) -> str:
+    """A Markdown table of :func:`stored_measured_groups` for every stored run of ``reference_dir``; the runs named
+    in ``holdouts`` (the calibration's pre-registered hold-outs) are listed without their values, which no closure
+    may be chosen from."""
+    from pathlib import Path
+
+    held = set(holdouts or ())
+    lines = ["| run | " + " | ".join(c[0] for c in MEASURED_COLUMNS) + " |", "|" + "---|" * (1 + len(MEASURED_COLUMNS))]
+    for folder in sorted(p.parent for p in Path(reference_dir).glob("*/reference.json")):
+        if folder.name in held:
+            lines.append(f"| {folder.name} | held out (data/calibration/holdouts.toml): not shown |"
+                         + " |" * (len(MEASURED_COLUMNS) - 1))
+            continue
+        groups = stored_measured_groups(folder)
+        start, end = groups["window"]
+        cells = [f"{start:.3g}-{end:.3g}" + ("" if groups["steady"] else " (last third)")]
+        for _, key, spec, scale in MEASURED_COLUMNS[1:]:
+            value = groups.get(key, math.nan)
+            cells.append("-" if not math.isfinite(value) else format(value * scale, spec))
+        lines.append(f"| {folder.name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    import argparse
+    from pathlib import Path
+
+    parser = argparse.ArgumentParser(prog="python -m analysis.groups", description=(
+        "print the controlling groups of a run set as a Markdown table: a priori from a run-set file (the default, "
+        "data/reference/design.toml), or measured from a folder of stored reference runs with --measured"))
+    parser.add_argument("source", nargs="?", default="data/reference/design.toml",
+                        help="a run-set file (default data/reference/design.toml), or with --measured a folder of "
+                             "stored runs (data/reference)")
+    parser.add_argument("--measured", action="store_true",
+                        help="the groups measured over each stored run's steady window (the registered hold-outs "
+                             "of --registry listed without their values)")
+    parser.add_argument("--registry", default="data/calibration/holdouts.toml",
+                        help="the calibration's registry whose hold-outs --measured leaves out (default "
+                             "data/calibration/holdouts.toml; 'none' for none)")
+    args = parser.parse_args(argv)
+    source = Path(args.source)
+    if args.measured:
+        if not source.is_dir():
+            print(f"analysis.groups: --measured {args.source}: allowed: a folder of stored reference runs "
+                  "(data/reference)", file=sys.stderr)
+            return 2
+        holdouts = ()
+        if args.registry != "none":
+            from analysis.calibration.registry import RegistryError, load_registry
+
+            try:
+                holdouts = load_registry(args.registry).holdouts
+            except (OSError, RegistryError) as err:
+                print(f"analysis.groups: --registry {args.registry}: {err}", file=sys.stderr)
+                return 2
+        print(measured_table(source, holdouts))
+        return 0
+    if not source.is_file():
+        print(f"analysis.groups: {args.source}: allowed: a run-set file (data/reference/design.toml)", file=sys.stderr)
+        return 2
+    print(design_table(source))
+    return 0
+
+
 if __name__ == "__main__":
-    print(design_table(sys.argv[1] if len(sys.argv) > 1 else "data/reference/design.toml"))
+    sys.exit(main())

@@ -76,3 +76,62 @@ def test_the_readme_group_table_is_the_design_files():
     start = next(k for k, line in enumerate(readme) if line.startswith("| run | family | case and overrides"))
     stop = next((k for k in range(start, len(readme)) if not readme[k].startswith("|")), len(readme))
     assert readme[start:stop] == design_table("data/reference/design.toml").splitlines()
+
+
+def test_measured_groups_over_a_given_window():
+    import pandas as pd
+
+    case = load_case("demo")
+    frame = pd.DataFrame({"time": [0.0, 1.0, 2.0, 3.0], "channel_radius": [1.0, 0.01, 0.03, 9.0],
+                          "channel_velocity": [9.0, 0.02, 0.04, 9.0]})
+    g = measured_groups(frame, case, (1.0, 2.0))
+    assert g["channel_radius"] == pytest.approx(0.02) and g["channel_velocity"] == pytest.approx(0.03)
+
+
+def test_the_measured_table_reads_each_stored_run_over_its_steady_window_and_hides_the_holdouts(tmp_path, capsys):
+    """`python -m analysis.groups data/reference --measured`: a stored run's row is its steady window's means (the
+    axis velocity the time series' own mean there), its floor layer's thickness as stored; a registered hold-out is
+    named without a value; a file where a folder is wanted is refused in one line."""
+    import shutil
+
+    from analysis import load_run
+    from analysis.floor_layer import read_floor_layer
+    from analysis.groups import main, stored_measured_groups
+    from analysis.steady import window_of
+
+    for name in ("demo_cell_25", "demo_feed_half_fine"):
+        shutil.copytree(f"data/reference/{name}", tmp_path / name)
+    groups = stored_measured_groups(tmp_path / "demo_cell_25")
+    series = load_run(tmp_path / "demo_cell_25").timeseries
+    (start, end), steady = window_of(series)
+    inside = series[(series["time"] >= start) & (series["time"] <= end)]
+    assert steady and groups["window"] == (start, end)
+    assert groups["channel_velocity"] == pytest.approx(inside["channel_velocity"].mean(), rel=1e-12)
+    thickness = read_floor_layer(tmp_path / "demo_cell_25" / "floor_layer.csv")[1]["thickness"]
+    assert groups["floor_to_channel"] == pytest.approx(thickness / groups["channel_radius"], rel=1e-12)
+    assert 0.5 < groups["stokes_ratio"] < 1.5  # the axis follows the Stokes flow its droplets drive (plume_force)
+    registry = tmp_path / "holdouts.toml"
+    registry.write_text('[holdouts]\nruns = ["demo_feed_half_fine"]\n[holdouts.why]\ndemo_feed_half_fine = "test"\n'
+                        '[families]\n[levels]\ncollision = []\ntransport = []\nwhole = ["demo_cell_25"]\n')
+    assert main([str(tmp_path), "--measured", "--registry", str(registry)]) == 0
+    rows = {line.split("|")[1].strip(): line for line in capsys.readouterr().out.splitlines()[2:]}
+    assert set(rows) == {"demo_cell_25", "demo_feed_half_fine"}
+    assert "not shown" in rows["demo_feed_half_fine"] and not any(c.isdigit() for c in
+                                                                  rows["demo_feed_half_fine"].split("not shown")[1])
+    assert f"{1e3 * groups['channel_velocity']:.3g}" in rows["demo_cell_25"]
+    assert main([str(registry), "--measured"]) == 2 and "allowed: a folder" in capsys.readouterr().err
+
+
+def test_the_readme_measured_table_is_the_stored_runs():
+    """data/reference/README.md's measured table is what `python -m analysis.groups data/reference --measured`
+    prints from the stored runs, row for row (a run restored or re-measured shows up in the README)."""
+    from pathlib import Path
+
+    from analysis.calibration.registry import load_registry
+    from analysis.groups import measured_table
+
+    readme = Path("data/reference/README.md").read_text(encoding="utf-8").splitlines()
+    start = next(k for k, line in enumerate(readme) if line.startswith("| run | window [s] |"))
+    stop = next((k for k in range(start, len(readme)) if not readme[k].startswith("|")), len(readme))
+    table = measured_table("data/reference", load_registry("data/calibration/holdouts.toml").holdouts)
+    assert readme[start:stop] == table.splitlines()
