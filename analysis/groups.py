@@ -121,7 +121,8 @@ def design_table(path) -> str:
 MEASURED_COLUMNS = (("window [s]", "window", "", 1.0), ("a [mm]", "channel_radius", ".3g", 1e3),
                     ("w0 [mm/s]", "channel_velocity", ".3g", 1e3), ("R/a", "column_to_channel", ".3g", 1.0),
                     ("Re_p", "channel_reynolds", ".2g", 1.0), ("sqrt(c)", "sqrt_c", ".2f", 1.0),
-                    ("w0/u_K", "stokes_ratio", ".2f", 1.0), ("delta_b [mm]", "floor_thickness", ".3g", 1e3),
+                    ("w0/u_K", "stokes_ratio", ".2f", 1.0), ("A0*", "core_a0", ".2f", 1.0),
+                    ("R* [mm]", "core_radius", ".3g", 1e3), ("delta_b [mm]", "floor_thickness", ".3g", 1e3),
                     ("delta_b/a", "floor_to_channel", ".2f", 1.0))
 
 
@@ -129,13 +130,15 @@ def stored_measured_groups(folder) -> dict:
     """The measured groups of a stored reference run (``data/reference/<name>/``) over its steady window (else its
     last third; :func:`analysis.steady.window_of`): :func:`measured_groups`, and where the run keeps them
     ``stokes_ratio`` w0 / u_K (the axis velocity over the confined Stokes flow its droplets drive, middle bands,
-    ``plume_force.csv``; :mod:`analysis.plume_force`), ``floor_thickness`` delta_b [m] (the excess thickness of the
+    ``plume_force.csv``; :mod:`analysis.plume_force`) with ``core_a0`` A0* = W w0 / Q [-] and ``core_radius`` R* [m]
+    (the uniform core carrying the feed at the axis speed that drives the run's axis at that ratio;
+    :func:`analysis.plume_force.equivalent_core`), ``floor_thickness`` delta_b [m] (the excess thickness of the
     matte layer over the floor, ``floor_layer.csv``; :mod:`analysis.floor_layer`) and ``floor_to_channel`` delta_b / a
     [-]; ``window`` (start, end) [s] and ``steady``."""
     from pathlib import Path
 
     from analysis.floor_layer import read_floor_layer
-    from analysis.plume_force import middle_ratio, read_plume_force
+    from analysis.plume_force import equivalent_core, middle_ratio, read_plume_force
     from analysis.runs import load_run
     from analysis.steady import window_of
     from settler.cases import load_case
@@ -149,7 +152,13 @@ def stored_measured_groups(folder) -> dict:
         return out
     out.update(measured_groups(run.timeseries, case, window))
     if (folder / "plume_force.csv").is_file():
-        out["stokes_ratio"] = middle_ratio(read_plume_force(folder / "plume_force.csv")[0])
+        from popbal.model import column_radius
+
+        table = read_plume_force(folder / "plume_force.csv")[0]
+        out["stokes_ratio"] = middle_ratio(table)
+        core = equivalent_core(table, case.feed.mass_rate / case.matte.density, column_radius(case),
+                               case.slag_viscosity, case.matte.density - case.slag.density)
+        out["core_a0"], out["core_radius"] = core["a0"], core["core_radius"]
     if (folder / "floor_layer.csv").is_file():
         out["floor_thickness"] = read_floor_layer(folder / "floor_layer.csv")[1]["thickness"]
         out["floor_to_channel"] = out["floor_thickness"] / out["channel_radius"]

@@ -161,3 +161,42 @@ def test_a_constructed_plume_is_measured_band_by_band(tmp_path):
                  for c in centres], CHANNEL_PROFILE, folder / "channel_profile.csv")
     with pytest.raises(ValueError, match="channel_profile.csv: no row at the snapshot time 20 s"):
         measure_plume_force(folder, (15.0, 20.0))
+
+
+@pytest.mark.parametrize("core", [0.004, 0.012, 0.03])
+def test_the_equivalent_core_recovers_a_uniform_core_that_carries_the_feed_at_the_axis_speed(core):
+    """A uniform core of radius a holding the feed Q at the axis speed u (load Q / u per height) drives u_K; the
+    equivalent core of that table is a again (to the area-uniform ring quadrature, 1e-3), and f = u / u_K."""
+    import pandas as pd
+
+    from analysis.plume_force import MIDDLE_BANDS, equivalent_core, stokes_axis_velocity
+
+    column, mu, drho, q, u, dz = 0.0564, 0.45, 1500.0, 2.15e-3 / 5000.0, 0.05, 0.01
+    n = 4000
+    radii = core * np.sqrt((np.arange(n) + 0.5) / n)  # area-uniform rings
+    volume = np.full(n, q / u * dz / n)
+    u_k = stokes_axis_velocity(radii, volume, dz, column, mu, drho, 1e-9)
+    assert u_k == pytest.approx(q / u * drho * GRAVITY * confined_axis_coefficient(column / core) / (4 * math.pi * mu),
+                                rel=1e-3)
+    rows = max(MIDDLE_BANDS.stop, 10)
+    table = pd.DataFrame({"z": np.arange(rows) * dz, "axis_velocity": np.full(rows, 0.8 * u_k),
+                          "stokes_axis_velocity": np.full(rows, u_k), "load": np.full(rows, q / u)})
+    # the measured axis 0.8 u_K: the load Q / u was set with u, so the core that drives 0.8 u_K at load Q / (0.8 u_K)
+    # is the one whose A0 is W (0.8 u_K) / Q
+    found = equivalent_core(table, q, column, mu, drho)
+    assert found["force_factor"] == pytest.approx(0.8, rel=1e-12)
+    w = u_k * 4 * math.pi * mu / (drho * GRAVITY)
+    assert found["a0"] == pytest.approx(w * 0.8 * u_k / q, rel=1e-12)
+    assert confined_axis_coefficient(column / found["core_radius"]) == pytest.approx(found["a0"], rel=1e-9)
+    table["axis_velocity"] = u  # the axis at the speed the load was built with: the core itself comes back
+    assert equivalent_core(table, q, column, mu, drho)["core_radius"] == pytest.approx(core, rel=1e-3)
+
+
+def test_the_equivalent_core_refuses_a_non_positive_feed():
+    import pandas as pd
+
+    from analysis.plume_force import equivalent_core
+
+    table = pd.DataFrame({"axis_velocity": np.ones(10), "stokes_axis_velocity": np.ones(10)})
+    with pytest.raises(ValueError, match="feed_volume_rate"):
+        equivalent_core(table, 0.0, 0.05, 0.45, 1500.0)
