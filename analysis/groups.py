@@ -122,7 +122,8 @@ MEASURED_COLUMNS = (("window [s]", "window", "", 1.0), ("a [mm]", "channel_radiu
                     ("w0 [mm/s]", "channel_velocity", ".3g", 1e3), ("R/a", "column_to_channel", ".3g", 1.0),
                     ("Re_p", "channel_reynolds", ".2g", 1.0), ("sqrt(c)", "sqrt_c", ".2f", 1.0),
                     ("w0/u_K", "stokes_ratio", ".2f", 1.0), ("A0*", "core_a0", ".2f", 1.0),
-                    ("R* [mm]", "core_radius", ".3g", 1e3), ("delta_b [mm]", "floor_thickness", ".3g", 1e3),
+                    ("R* [mm]", "core_radius", ".3g", 1e3), ("t", "plume_speed_ratio", ".2f", 1.0),
+                    ("R*_t [mm]", "moving_core_radius", ".3g", 1e3), ("delta_b [mm]", "floor_thickness", ".3g", 1e3),
                     ("delta_b/a", "floor_to_channel", ".2f", 1.0))
 
 
@@ -132,7 +133,9 @@ def stored_measured_groups(folder) -> dict:
     ``stokes_ratio`` w0 / u_K (the axis velocity over the confined Stokes flow its droplets drive, middle bands,
     ``plume_force.csv``; :mod:`analysis.plume_force`) with ``core_a0`` A0* = W w0 / Q [-] and ``core_radius`` R* [m]
     (the uniform core carrying the feed at the axis speed that drives the run's axis at that ratio;
-    :func:`analysis.plume_force.equivalent_core`), ``floor_thickness`` delta_b [m] (the excess thickness of the
+    :func:`analysis.plume_force.equivalent_core`), and with ``plume_zones.csv`` ``plume_speed_ratio`` t [-] (the plume
+    droplets' speed over the axis speed, :func:`analysis.plume_zones.plume_speed_ratio`) and ``moving_core_radius``
+    R*_t [m] (the same core carrying the feed at t u), ``floor_thickness`` delta_b [m] (the excess thickness of the
     matte layer over the floor, ``floor_layer.csv``; :mod:`analysis.floor_layer`) and ``floor_to_channel`` delta_b / a
     [-]; ``window`` (start, end) [s] and ``steady``."""
     from pathlib import Path
@@ -159,6 +162,14 @@ def stored_measured_groups(folder) -> dict:
         core = equivalent_core(table, case.feed.mass_rate / case.matte.density, column_radius(case),
                                case.slag_viscosity, case.matte.density - case.slag.density)
         out["core_a0"], out["core_radius"] = core["a0"], core["core_radius"]
+        if (folder / "plume_zones.csv").is_file():
+            from analysis.plume_zones import plume_speed_ratio, read_plume_zones
+
+            out["plume_speed_ratio"] = speed = plume_speed_ratio(read_plume_zones(folder / "plume_zones.csv")[0])
+            if speed > 0.0:
+                out["moving_core_radius"] = equivalent_core(
+                    table, case.feed.mass_rate / case.matte.density, column_radius(case), case.slag_viscosity,
+                    case.matte.density - case.slag.density, speed)["core_radius"]
     if (folder / "floor_layer.csv").is_file():
         out["floor_thickness"] = read_floor_layer(folder / "floor_layer.csv")[1]["thickness"]
         out["floor_to_channel"] = out["floor_thickness"] / out["channel_radius"]

@@ -157,26 +157,28 @@ def middle_ratio(table: pd.DataFrame) -> float:
 
 
 def equivalent_core(table: pd.DataFrame, feed_volume_rate: float, column_radius: float, viscosity: float,
-                    density_difference: float) -> dict[str, float]:
+                    density_difference: float, speed_ratio: float = 1.0) -> dict[str, float]:
     """The uniform core popbal's line-force channel would need to drive the measured axis (middle bands): with the
-    feed Q [m^3/s] carried at the axis speed u (a load Q / u per height in a uniform core of radius R* in the column
-    of radius R) and the force factor f = u / u_K, the channel drives u when
+    feed Q [m^3/s] carried at t times the axis speed u (``speed_ratio`` t: a load Q / (t u) per height in a uniform
+    core of radius R* in the column of radius R) and the force factor f = u / u_K, the channel drives u when
 
-        A0(R / R*) = W u / Q,    W = u_K 4 pi mu / (drho g)   (the band's load weighted by K_sigma)
+        A0(R / R*) = W t u / Q,    W = u_K 4 pi mu / (drho g)   (the band's load weighted by K_sigma)
 
-    Returns ``a0`` (W u / Q [-]), ``core_radius`` R* [m] (NaN where A0 cannot reach W u / Q: R* would be at least
-    R), ``force_factor`` f [-] and ``axis_velocity`` u [m/s], means over :data:`MIDDLE_BANDS`."""
+    (then at a multiplier f / t on the line-force law). Returns ``a0`` (W t u / Q [-]), ``core_radius`` R* [m] (NaN
+    where A0 cannot reach W t u / Q: R* would be at least R), ``force_factor`` f [-] and ``axis_velocity`` u [m/s],
+    means over :data:`MIDDLE_BANDS`."""
     from scipy.optimize import brentq
 
     from popbal.closures import confined_axis_coefficient
 
     for name, value, unit in (("feed_volume_rate", feed_volume_rate, "m^3/s"), ("column_radius", column_radius, "m"),
-                              ("viscosity", viscosity, "Pa s"), ("density_difference", density_difference, "kg/m^3")):
+                              ("viscosity", viscosity, "Pa s"), ("density_difference", density_difference, "kg/m^3"),
+                              ("speed_ratio", speed_ratio, "-")):
         _check_positive(name, value, unit)
     middle = table.iloc[MIDDLE_BANDS]
     u, u_k = float(middle["axis_velocity"].mean()), float(middle["stokes_axis_velocity"].mean())
     load = u_k * 4.0 * math.pi * viscosity / (density_difference * GRAVITY)
-    a0 = load * u / feed_volume_rate
+    a0 = load * speed_ratio * u / feed_volume_rate
     radius = math.nan
     if a0 > 0.0 and math.isfinite(a0):  # A0(R / a) falls from +inf at a -> 0 to 0 at a = R
         x = brentq(lambda s: confined_axis_coefficient(1.0 / s) - a0, 1e-12, 1.0 - 1e-12)

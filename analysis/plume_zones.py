@@ -196,6 +196,17 @@ def shares(table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+def plume_speed_ratio(table: pd.DataFrame, bands: slice = slice(3, 7)) -> float:
+    """t [-]: the plume's droplets' (core and skirt) volume-weighted downward velocity over the axis velocity, over
+    ``bands`` (default the middle four of ten, as analysis.plume_force's MIDDLE_BANDS): below 1 where the plume's
+    droplets lag its axis, above 1 where grown droplets outrun the slag."""
+    middle = table.iloc[bands]
+    load = middle["core_load"] + middle["skirt_load"]
+    moving = (middle["core_load"] * middle["core_velocity"] + middle["skirt_load"] * middle["skirt_velocity"]).sum()
+    axis = float(middle["axis_velocity"].mean())
+    return float(moving / load.sum()) / axis if axis != 0.0 and load.sum() > 0.0 else float("nan")
+
+
 def _report(folder, table, meta) -> None:
     print(f"{folder}: {meta['window'][0]:g}-{meta['window'][1]:g} s, {len(meta['snapshots'])} snapshots")
     show = shares(table)

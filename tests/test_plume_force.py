@@ -190,6 +190,9 @@ def test_the_equivalent_core_recovers_a_uniform_core_that_carries_the_feed_at_th
     assert confined_axis_coefficient(column / found["core_radius"]) == pytest.approx(found["a0"], rel=1e-9)
     table["axis_velocity"] = u  # the axis at the speed the load was built with: the core itself comes back
     assert equivalent_core(table, q, column, mu, drho)["core_radius"] == pytest.approx(core, rel=1e-3)
+    # droplets at half the axis speed: the same load is carried by an axis twice as fast (A0 = W t u / Q)
+    table["axis_velocity"] = 2 * u
+    assert equivalent_core(table, q, column, mu, drho, 0.5)["core_radius"] == pytest.approx(core, rel=1e-3)
 
 
 def test_the_equivalent_core_refuses_a_non_positive_feed():

@@ -103,3 +103,18 @@ def test_the_window_measure_command_line_reports_each_run_and_refuses_bad_input_
     seen.clear()
     assert window_measure_main(["bad", "a"], *args) == 2
     assert capsys.readouterr().err.strip() == "prog: bad: no droplet snapshot" and seen == []
+
+
+def test_the_plume_speed_ratio_is_the_moving_droplets_volume_weighted_speed_over_the_axis():
+    """t over the middle bands: core and skirt weighted by their loads, the return flow left out; by hand."""
+    import pandas as pd
+
+    from analysis.plume_zones import plume_speed_ratio
+
+    n = 10
+    table = pd.DataFrame({"z": np.arange(n) * 0.01, "axis_velocity": np.full(n, 0.05),
+                          "core_load": np.full(n, 3e-6), "skirt_load": np.full(n, 1e-6), "return_load": np.full(n, 9.0),
+                          "core_velocity": np.full(n, 0.04), "skirt_velocity": np.full(n, 0.02),
+                          "return_velocity": np.full(n, -5.0)})
+    table.loc[0, "core_velocity"] = 99.0  # outside the middle bands: not counted
+    assert plume_speed_ratio(table) == pytest.approx((3 * 0.04 + 1 * 0.02) / 4 / 0.05, rel=1e-12)
