@@ -440,8 +440,8 @@ def column_radius(case: Case) -> float:
 def channel_closure(case: Case) -> tuple[float, float, float, float]:
     """(R_c [m], u_s [m/s], Re [-], transport factor [-]) of the case's channel (popbal.closures).
 
-    R_c: channel_radius_factor inlet radii ('inlet' form, the default) or channel_radius_factor sqrt(Q_ch / (pi u_s))
-    ('flux'); u_s = sqrt(c_ch Q_ch drho g / (pi mu)) the steady plume velocity of the matte feed Q_ch [m^3/s] that
+    R_c: channel_radius_factor inlet radii ('inlet' form, the default), channel_radius_factor sqrt(Q_ch / (pi u_s))
+    ('flux') or channel_radius ('fixed'); u_s = sqrt(c_ch Q_ch drho g / (pi mu)) the steady plume velocity of the matte feed Q_ch [m^3/s] that
     enters the channel, with c_ch times the confined plume's c(R / R_c) under ``popbal.confinement``, of the law
     ``popbal.plume_law`` (popbal.closures.PLUME_LAWS; solved with R_c by popbal.closures.confined_closure); Re = rho_s u_s R_c / mu; transport factor 1 / (1 + Re / plume_reynolds_scale) (1 without).
     """
@@ -452,7 +452,14 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
         raise CaseError(f"popbal.plume_law = {p.plume_law!r}: the law of the confined plume's coefficient; allowed "
                         "only with popbal.confinement = true (or leave it out)")
 
+    if (p.channel_radius_form == "fixed") != (p.channel_radius is not None):
+        raise CaseError(f"popbal.channel_radius = {p.channel_radius!r} m with popbal.channel_radius_form = "
+                        f"{p.channel_radius_form or 'inlet'!r}: allowed: both together (a fixed channel radius), or "
+                        "neither")
+
     def radius_of(velocity):
+        if p.channel_radius_form == "fixed":
+            return p.channel_radius if p.channel_radius_factor > 0.0 else 0.0
         if p.channel_radius_form == "flux" and p.plume_dilution_reynolds:  # no wider than the inlet that feeds it
             return min(closures.diluted_channel_radius(volume_flux, velocity, p.channel_radius_factor,
                                                        p.plume_dilution_reynolds, case.slag.density,

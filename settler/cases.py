@@ -324,10 +324,18 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                              "plume velocity u_c that carries the droplets; absent: 1.", 0.0,
                                      exclusive_minimum=True, optional=True),
         "channel_radius_form": Field(S, "", "How the channel radius R_c is set (popbal.closures): 'inlet' "
-                                            "(channel_radius_factor inlet radii) or 'flux' (channel_radius_factor x "
+                                            "(channel_radius_factor inlet radii), 'flux' (channel_radius_factor x "
                                             "sqrt(Q_ch / (pi u_s)): continuity at a fixed plume volume fraction "
-                                            "1 / factor^2, u_s the steady plume velocity); absent: 'inlet'.",
-                                     choices=("inlet", "flux"), optional=True),
+                                            "1 / factor^2, u_s the steady plume velocity) or 'fixed' (R_c = "
+                                            "popbal.channel_radius whatever the feed and the box; "
+                                            "channel_radius_factor then only says whether there is a channel, 0 "
+                                            "for none); absent: 'inlet'.",
+                                     choices=("inlet", "flux", "fixed"), optional=True),
+        "channel_radius": Field(F, "m", "R_c with channel_radius_form = 'fixed': the compact plume's equivalent core "
+                                        "measured in the reference runs, about 10 mm in every compact run of the set "
+                                        "(analysis.plume_force.equivalent_core; docs/guide/reduced-model.md), a length "
+                                        "with no law yet, so not for boxes far from the set's.", 0.0,
+                                exclusive_minimum=True, optional=True),
         "plume_dilution_reynolds": Field(F, "-", "Re_d, with channel_radius_form = 'flux': the plume's volume "
                                                  "fraction is diluted by its Reynolds number, 1 / (factor^2 (1 + Re / "
                                                  "Re_d)), Re = rho_s u_s R_c / mu (popbal.closures); absent: the fixed "

@@ -112,3 +112,34 @@ def test_steady_axis_velocity_is_the_plume_velocity(reynolds_scale, confined):
     assert np.mean(steady["channel_velocity"]) == pytest.approx(u_s, rel=0.05)
     if reynolds_scale is not None:
         assert transport == pytest.approx(0.5, rel=0.01)
+
+
+def test_a_fixed_channel_radius_gives_the_line_force_plume_its_square_root_law():
+    """'fixed' form: R_c is popbal.channel_radius at every feed, so under the confined line-force law u_s^2 =
+    c_ch A0(R / R_c) Q drho g / (4 pi mu) by hand, and four times the feed moves the plume exactly twice as fast
+    (the full runs' compact plumes: 41.9 to 82.4 mm/s from half to twice the demo's feed)."""
+    from popbal.model import column_radius
+
+    overrides = {"case.calibration": "none", "popbal.channel_radius_form": "fixed", "popbal.channel_radius": 0.0105,
+                 "popbal.channel_radius_factor": 1.0, "popbal.confinement": True, "popbal.plume_law": "line_force",
+                 "popbal.channel_coefficient": 1.0, "popbal.channel_feed_fraction": 1.0}
+    case = load_case("demo", overrides)
+    radius, velocity, _, _ = channel_closure(case)
+    q = case.feed.mass_rate / case.matte.density
+    a0 = closures.confined_axis_coefficient(column_radius(case) / 0.0105)
+    by_hand = math.sqrt(a0 * q * (case.matte.density - case.slag.density) * STANDARD_GRAVITY
+                        / (4 * math.pi * case.slag_viscosity))
+    assert radius == 0.0105 and velocity == pytest.approx(by_hand, rel=1e-9)
+    quadruple = load_case("demo", {**overrides, "feed.mass_rate": 4 * case.feed.mass_rate})
+    assert channel_closure(quadruple)[0] == 0.0105
+    assert channel_closure(quadruple)[1] == pytest.approx(2 * velocity, rel=1e-9)
+    assert channel_closure(load_case("demo", {**overrides, "popbal.channel_radius_factor": 0.0}))[0] == 0.0
+
+
+@pytest.mark.parametrize("extra", [{"popbal.channel_radius_form": "fixed"}, {"popbal.channel_radius": 0.01},
+                                   {"popbal.channel_radius_form": "flux", "popbal.channel_radius": 0.01}])
+def test_the_fixed_radius_and_its_form_go_together(extra):
+    from settler.errors import CaseError
+
+    with pytest.raises(CaseError, match="popbal.channel_radius = .*allowed: both together"):
+        channel_closure(load_case("demo", {"case.calibration": "none", **extra}))
