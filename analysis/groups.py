@@ -159,17 +159,16 @@ def stored_measured_groups(folder) -> dict:
 
         table = read_plume_force(folder / "plume_force.csv")[0]
         out["stokes_ratio"] = middle_ratio(table)
-        core = equivalent_core(table, case.feed.mass_rate / case.matte.density, column_radius(case),
-                               case.slag_viscosity, case.matte.density - case.slag.density)
+        plume = (table, case.feed.mass_rate / case.matte.density, column_radius(case), case.slag_viscosity,
+                 case.matte.density - case.slag.density)
+        core = equivalent_core(*plume)
         out["core_a0"], out["core_radius"] = core["a0"], core["core_radius"]
         if (folder / "plume_zones.csv").is_file():
             from analysis.plume_zones import plume_speed_ratio, read_plume_zones
 
             out["plume_speed_ratio"] = speed = plume_speed_ratio(read_plume_zones(folder / "plume_zones.csv")[0])
             if speed > 0.0:
-                out["moving_core_radius"] = equivalent_core(
-                    table, case.feed.mass_rate / case.matte.density, column_radius(case), case.slag_viscosity,
-                    case.matte.density - case.slag.density, speed)["core_radius"]
+                out["moving_core_radius"] = equivalent_core(*plume, speed)["core_radius"]
     if (folder / "floor_layer.csv").is_file():
         out["floor_thickness"] = read_floor_layer(folder / "floor_layer.csv")[1]["thickness"]
         out["floor_to_channel"] = out["floor_thickness"] / out["channel_radius"]
