@@ -24,7 +24,10 @@ The plume law and the Kynch threshold are derived in ``shared/reference/reduced-
 Stokes plume: heavy core of radius a in a column of radius R, zero net flux, no slip at R). :func:`measured_groups`
 gives the same groups from a run's measured channel (its mid-height radius and axis velocity, means over the last
 third of the run): R / a and Re_p with the measured a and w0, and the measured sqrt(c) = w0 / sqrt(Q drho g /
-(pi mu)). ``python -m analysis.groups data/reference/design.toml`` prints the a priori table of a run set.
+(pi mu)). ``python -m analysis.groups data/reference/design.toml`` prints the a priori table of a run set, and
+``python -m analysis.groups data/reference --measured`` the measured one of the stored runs over their steady windows
+(:func:`measured_table`, with the plume's equivalent core and the floor layer; the calibration's registered
+hold-outs listed without values).
 """
 
 from __future__ import annotations
