@@ -489,17 +489,18 @@ def _stored(runs, reference_dir) -> tuple[list[str], list[str]]:
     return have, [r for r in runs if r not in have]
 
 
-def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
-                  profile: bool = True, progress: bool = True, band_samples: int = BAND_SAMPLES,
-                  closures: str = "designed") -> Hierarchy:
-    """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds, with the
-    closure set ``closures`` (:data:`CLOSURES`)."""
+def measured_closures(registry: Registry, reference_dir: str | Path = "data/reference",
+                      closures: str = "designed") -> dict:
+    """What the closure set ``closures`` (:data:`CLOSURES`) takes from measurement before any level is fitted, from
+    the runs the registry names and ``reference_dir`` holds (never a hold-out): "fixed" ({dotted [popbal] key: value}:
+    the closure form and switches, the collision level's efficiency, the radius factor or dilution law, the roof law
+    and kernel where the set has them), "values" ({key: (value, standard error)}), "collision", "radius_factor",
+    "roof", "transport_runs" and "missing" ({level: registered runs not stored})."""
     if closures not in CLOSURES:
         raise ValueError(f"closures {closures!r}: allowed {', '.join(CLOSURES)}")
     from analysis.kernel_run import kernel_run_efficiency
     from settler.cases import load_case
 
-    seed = seed_scatter(reference_dir)
     missing: dict[str, list[str]] = {}
     collision_runs, missing["collision"] = _stored(registry.levels.get("collision", ()), reference_dir)
     if not collision_runs:
@@ -534,6 +535,24 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
         roof["kernel"] = roof_kernel_from_collisions(whole_runs, reference_dir, thickness=roof["thickness"])
         fixed.update({"popbal.roof_collision_efficiency": roof["kernel"]["efficiency"],
                       "popbal.roof_shear_coefficient": roof["kernel"]["shear_coefficient"]})
+    return {"fixed": fixed, "values": values, "collision": collision, "radius_factor": k_r, "roof": roof,
+            "transport_runs": transport_runs, "missing": missing}
+
+
+def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
+                  profile: bool = True, progress: bool = True, band_samples: int = BAND_SAMPLES,
+                  closures: str = "designed") -> Hierarchy:
+    """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds, with the
+    closure set ``closures`` (:data:`CLOSURES`)."""
+    if closures not in CLOSURES:
+        raise ValueError(f"closures {closures!r}: allowed {', '.join(CLOSURES)}")
+    from settler.cases import load_case
+
+    seed = seed_scatter(reference_dir)
+    measured = measured_closures(registry, reference_dir, closures)
+    fixed, values, missing = measured["fixed"], measured["values"], measured["missing"]
+    collision, k_r, roof, transport_runs = (measured[k] for k in ("collision", "radius_factor", "roof",
+                                                                   "transport_runs"))
     levels, floor = [], None
     for level in ("transport", "whole"):
         if level == "transport":
