@@ -48,7 +48,8 @@ import pandas as pd
 
 from settler.physics.constants import STANDARD_GRAVITY as GRAVITY
 
-from .plume_zones import axis_window, band_value, read_window_table, snapshot_rows, write_window_table
+from .plume_zones import (MIDDLE_BANDS, axis_window, band_value, read_window_table, snapshot_rows,
+                          write_window_table)
 
 #: The stored table's name beside a reference run.
 PLUME_FORCE_FILE = "plume_force.csv"
@@ -61,8 +62,6 @@ PLUME_FORCE_UNITS = {
     "stokes_axis_velocity": ("m/s", "u_K: the confined Stokes flow's axis velocity driven by the band's droplets"),
     "load": ("m^3/m", "droplet volume per height in the band"),
 }
-#: The bands a summary takes: the middle four of ten (the ends are where the slag turns).
-MIDDLE_BANDS = slice(3, 7)
 
 
 def ring_kernel(radius, column_radius: float):

@@ -53,6 +53,10 @@ PLUME_ZONES_UNITS = {
 }
 
 
+#: The bands a summary takes: the middle four of ten (the ends are where the slag turns); analysis.plume_force's too.
+MIDDLE_BANDS = slice(3, 7)
+
+
 def split_band(r, volume, down, core_radius: float, return_radius: float) -> dict[str, tuple[float, float]]:
     """{part: (volume [m^3], volume x downward velocity [m^4/s])} of one band's droplets at distances ``r`` [m] from
     the axis with ``volume`` [m^3] and downward velocity ``down`` [m/s], split at ``core_radius`` a and
@@ -196,10 +200,10 @@ def shares(table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def plume_speed_ratio(table: pd.DataFrame, bands: slice = slice(3, 7)) -> float:
+def plume_speed_ratio(table: pd.DataFrame, bands: slice = MIDDLE_BANDS) -> float:
     """t [-]: the plume's droplets' (core and skirt) volume-weighted downward velocity over the axis velocity, over
-    ``bands`` (default the middle four of ten, as analysis.plume_force's MIDDLE_BANDS): below 1 where the plume's
-    droplets lag its axis, above 1 where grown droplets outrun the slag."""
+    ``bands`` (default :data:`MIDDLE_BANDS`): below 1 where the plume's droplets lag its axis, above 1 where grown
+    droplets outrun the slag."""
     middle = table.iloc[bands]
     load = middle["core_load"] + middle["skirt_load"]
     moving = (middle["core_load"] * middle["core_velocity"] + middle["skirt_load"] * middle["skirt_velocity"]).sum()
