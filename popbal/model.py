@@ -441,8 +441,8 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
     """(R_c [m], u_s [m/s], Re [-], transport factor [-]) of the case's channel (popbal.closures).
 
     R_c: channel_radius_factor inlet radii ('inlet' form, the default), channel_radius_factor sqrt(Q_ch / (pi u_s))
-    ('flux') or channel_radius ('fixed'); u_s = sqrt(c_ch Q_ch drho g / (pi mu)) the steady plume velocity of the matte feed Q_ch [m^3/s] that
-    enters the channel, with c_ch times the confined plume's c(R / R_c) under ``popbal.confinement``, of the law
+    ('flux') or channel_radius ('fixed'); u_s = sqrt(c_ch Q_ch drho g / (pi mu)) the steady plume velocity of the
+    matte feed Q_ch [m^3/s] that enters the channel, with c_ch times the confined plume's c(R / R_c) under ``popbal.confinement``, of the law
     ``popbal.plume_law`` (popbal.closures.PLUME_LAWS; solved with R_c by popbal.closures.confined_closure); Re = rho_s u_s R_c / mu; transport factor 1 / (1 + Re / plume_reynolds_scale) (1 without).
     """
     p, g = case.popbal, case.geometry

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from analysis.calibration.probe import main, parse_value, probe
+from analysis.calibration.probe import main, parse_setting, probe
 from analysis.calibration.registry import load_registry
 
 
@@ -16,16 +16,19 @@ def test_a_probe_refuses_a_registered_holdout(capsys):
     assert "demo_drho_07_fine is a pre-registered hold-out" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("argv, message", [(["--set", "channel_coefficient"], "allowed: section.key=value"),
+@pytest.mark.parametrize("argv, message", [(["--set", "channel_coefficient"], "is not of the form section.key=value"),
+                                           (["--set", "channel_coefficient=1"], "allowed: section.key=value"),
                                            (["--runs", "nowhere"], "nowhere not stored")])
 def test_a_probe_refuses_bad_options_in_one_line(argv, message, capsys):
     assert main(argv) == 2
     assert message in capsys.readouterr().err
 
 
-def test_values_parse_as_the_case_files_take_them():
-    assert parse_value("true") is True and parse_value("False") is False
-    assert parse_value("0.0105") == 0.0105 and parse_value("fixed") == "fixed" and parse_value("none") is None
+def test_values_parse_as_the_case_overrides_take_them():
+    assert parse_setting("popbal.busy_partners=true") == ("popbal.busy_partners", True)
+    assert parse_setting("popbal.channel_radius=0.0105") == ("popbal.channel_radius", 0.0105)
+    assert parse_setting("popbal.channel_radius_form=fixed") == ("popbal.channel_radius_form", "fixed")
+    assert parse_setting("popbal.plume_dilution_reynolds=none") == ("popbal.plume_dilution_reynolds", None)
 
 
 def test_the_line_force_plume_at_the_measured_core_gives_the_feed_familys_axis_velocity():

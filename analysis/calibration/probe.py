@@ -27,17 +27,16 @@ BOTTOM_KEYS = ("popbal.bottom_layer_factor", "popbal.bottom_turning_share", "pop
                "popbal.bottom_lift_share", "popbal.bottom_lift_velocity_ratio")
 
 
-def parse_value(text: str):
-    """A --set value as the case files take it: true / false, a number, none (the key left unset: e.g. the dilution
-    law a closure set measures, when the form given does not take it), else the text."""
-    if text.lower() == "none":
-        return None
-    if text.lower() in ("true", "false"):
-        return text.lower() == "true"
-    try:
-        return float(text)
-    except ValueError:
-        return text
+def parse_setting(text: str) -> tuple[str, object]:
+    """A --set item as the case overrides take it (settler.cases.parse_override: the value read as TOML, else a
+    string), with ``none`` leaving the key unset (e.g. the dilution law a closure set measures, where the form given
+    does not take it). CaseError where it is not section.key=value."""
+    from settler.cases import CaseError, parse_override
+
+    key, value = parse_override(text)
+    if "." not in key:
+        raise CaseError(f"--set {text!r}: allowed: section.key=value (e.g. popbal.channel_coefficient=1)")
+    return key, None if value == "none" else value
 
 
 def probe(runs, overrides: dict, registry, reference_dir="data/reference", closures: str = "zones_line",
@@ -91,14 +90,11 @@ def main(argv=None) -> int:
                         help="the calibration's registry: its levels give the default runs, its hold-outs are "
                              "refused")
     args = parser.parse_args(argv)
-    overrides = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or "." not in key:
-            print(f"probe: --set {item!r}: allowed: section.key=value (e.g. popbal.channel_coefficient=1)",
-                  file=sys.stderr)
-            return 2
-        overrides[key] = parse_value(value)
+    try:
+        overrides = dict(parse_setting(item) for item in args.set)
+    except CaseError as exc:
+        print(f"probe: {exc}", file=sys.stderr)
+        return 2
     try:
         registry = load_registry(args.registry)
     except (OSError, RegistryError) as exc:
