@@ -73,7 +73,7 @@ deep's feed in 50 and 150 mm columns (Re ~0.4, a Stokes plume that keeps about t
 0.021 and 0.013 in the demo at half and one times its feed at 2.5 mm cells (Re 2.2 and 4.3), 0.005 in simple and
 cubic (Re 18): the plume dilutes with the slag it entrains as it gains inertia. With Re = rho_s u_s R_c / mu taken
 at the radius that carries Q_ch at u_s with the measured phi_p, phi_p = k_R^-2 / (1 + Re / Re_d) describes these
-seven training runs within 19 % rms (k_R 4.92, Re_d 2.3; :func:`analysis.calibration.hierarchy.dilution_from_zones`),
+seven training runs within 19 % rms (k_R 4.92, Re_d 2.3; :func:`analysis.calibration.zones.dilution_from_zones`),
 where one volume fraction (the flux form alone) misses them by up to a factor of five. Not described: a plume
 that fills its column (deep's feed in the 20 mm column, phi_p 0.007), and the one-cell plumes of the demo's runs
 at 5 mm cells (phi_p 0.04-0.10 at Re 0.8-6), a grid effect (data/reference/README.md, grid study).
@@ -168,6 +168,20 @@ roof the slag's downflow stays spread over the box: in the channel it is under 1
 coefficients of the paragraph above become 0.036 in cubic (next to simple's 0.034, which has no slag feed: the two
 share geometry and feed), 0.013 and 0.044 in deep's 50 and 20 mm columns; the demo family has no slag feed.
 
+The roof's thickness (``roof_thickness_form``). The zone diagnostics count the layer in slices one cell high, so at
+5 mm cells every run's roof is one or two cells thick (5-10 mm) and its volume fraction phi_L = I / delta the
+cell's, not the layer's. At 3.3 and 2.5 mm cells (the demo's resolved families, demo_re32_fine, the resolved
+coalescence-off demo, demo_cell_33 and deep_w002) the layer is 2.5-5 mm thick and thins as the feed flux grows, and
+its volume fraction follows the feed flux over the Stokes velocity U_s of the mean fed droplet:
+j / (phi_L U_s) = 2.29-2.79 in all eleven, over fourfold feed and viscosity, with and without coalescence, in the
+demo's box and deep's 20 mm column (docs/guide/reduced-model.md; at 5 mm cells 2.8-9.4). The layer's droplets
+leave it at k U_s, k about 2.5: the drainage law. With ``roof_thickness_form = "drainage"`` popbal sets the roof's
+thickness from it (:func:`roof_drainage_thickness`, ``roof_drainage_ratio`` k): the cloud law keeps the inventory I
+and the drainage law the volume fraction j / (k U_s), so delta = I / phi_L thins as sqrt(mu / j) U_s, and the roof's
+collisions, which go as I^2 / delta, grow with the feed as the full runs' do, where one thickness for every run
+put that growth into the roof's efficiency (1.04-1.87 at 4.9 mm over the five resolved demo runs, 0.91-1.16 at each
+run's own thickness). ``"fixed"`` (the default) keeps ``roof_thickness``.
+
 Bottom layer (``bottom_layer_factor`` f_b; zone "bottom"). The full runs hold matte just above the floor (demo:
 volume fraction 5.8e-3 in the bottom 10 mm against 1e-3 over mid-height; without coalescence 40e-3, 82 000 of 107
 000 droplets within 20 mm of the floor), and almost none of it returns with the slag: the upward droplet flux below
@@ -201,7 +215,7 @@ channel holds its droplets well mixed over pi R_c^2, where the full runs' plume 
 merges under the inlet between the floor's and the roof's height bands over the same droplets' collisions mixed over
 popbal's channel section are 1.4 / 2.3 / 5.3 at half / one / twice the demo's feed at 2.5 mm cells, 1.4-1.5 in simple
 and cubic, 1.0-2.3 in deep's columns, where cell by cell the engine merges 1.5-2.6 pairs per gravitational collision
-(:func:`analysis.calibration.hierarchy.channel_kernel_from_collisions`; 2026-12-06, docs/guide/reduced-model.md).
+(:func:`analysis.calibration.zones.channel_kernel_from_collisions`; 2026-12-06, docs/guide/reduced-model.md).
 E_ch multiplies both kernels in the channel zone and nowhere else; no law sets it yet and no stored layer has it.
 
 The bottom layer's lift into the return flow (``bottom_lift_share`` lambda, ``bottom_lift_velocity_ratio`` beta).
@@ -330,6 +344,29 @@ def roof_inventory(volume_flux_density, excess_density, viscosity, coefficient, 
                          f"{slag_velocity!r} m/s) needs its thickness > 0")
     b = slag_velocity / thickness
     return 2.0 * volume_flux_density / (b + math.sqrt(b * b + 4.0 * a * volume_flux_density))
+
+
+def roof_drainage_thickness(volume_flux_density, stokes_velocity, drainage_ratio, excess_density, viscosity,
+                            coefficient, gravity=STANDARD_GRAVITY, slag_velocity=0.0):
+    """The roof layer's thickness delta [m] under the drainage law (``roof_thickness_form = "drainage"``; module
+    docstring): the layer's droplets leave it at k U_s, k = ``drainage_ratio`` [-] times the Stokes velocity U_s [m/s]
+    of the mean fed droplet (``stokes_velocity``), so that fed at j [m/s] it holds the volume fraction
+    phi_L = j / (k U_s); with the cloud law's drainage u_L = c_L phi drho g delta^2 / mu and the slag's w [m/s]
+    through it (j = phi (u_L + w), :func:`roof_inventory`)
+
+        delta = sqrt(mu k U_s (k U_s - w) / (c_L drho g j)),
+
+    so that I / delta = phi_L with I = roof_inventory(j, ..., w, delta). ValueError where the slag alone outruns the
+    law's drainage (k U_s <= w) or without feed."""
+    drained = drainage_ratio * stokes_velocity
+    if not volume_flux_density > 0.0:
+        raise ValueError(f"volume_flux_density = {volume_flux_density!r} m/s: the drainage law's thickness needs a "
+                         "matte feed")
+    if not drained > slag_velocity:
+        raise ValueError(f"drainage k U_s = {drained!r} m/s: the slag through the roof ({slag_velocity!r} m/s) alone "
+                         "carries the layer away; allowed: k U_s above it")
+    return math.sqrt(viscosity * drained * (drained - slag_velocity)
+                     / (coefficient * excess_density * gravity * volume_flux_density))
 
 
 def roof_coefficient(volume_flux_density, inventory, excess_density, viscosity, gravity=STANDARD_GRAVITY,

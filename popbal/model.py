@@ -281,10 +281,9 @@ def build(case: Case) -> Model:
         raise CaseError(f"popbal.channel_collision_efficiency = {p.channel_collision_efficiency!r}: sets the kernel "
                         "of a channel zone this case does not have; allowed only with popbal.channel_radius_factor > 0 "
                         "(or leave it out)")
-    for key, layer, needs in (("roof_collision_efficiency", roof_volume > 0.0, "popbal.roof_layer_coefficient and "
-                               "popbal.roof_thickness"),
-                              ("roof_shear_coefficient", roof_volume > 0.0, "popbal.roof_layer_coefficient and "
-                               "popbal.roof_thickness"),
+    roof_keys = "popbal.roof_layer_coefficient and popbal.roof_thickness (or popbal.roof_drainage_ratio)"
+    for key, layer, needs in (("roof_collision_efficiency", roof_volume > 0.0, roof_keys),
+                              ("roof_shear_coefficient", roof_volume > 0.0, roof_keys),
                               ("bottom_drain_coefficient", bottom_thickness > 0.0, "popbal.bottom_layer_factor")):
         if getattr(p, key) is not None and not layer:
             raise CaseError(f"popbal.{key} = {getattr(p, key)!r}: sets a layer this case does not have; allowed only "
@@ -308,7 +307,7 @@ def build(case: Case) -> Model:
                  velocity_table=table, age_step=tau / TABLE_PER_TAU, residence_time=residence, stop_time=stop_time,
                  horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
                  viscosity=case.slag_viscosity, cloud_coefficient=cloud_coefficient, cloud_radius=cloud_radius,
-                 parameters=parameters, return_velocity=return_velocity, roof_thickness=p.roof_thickness or 0.0,
+                 parameters=parameters, return_velocity=return_velocity, roof_thickness=roof_thickness(case),
                  roof_coefficient=roof_coefficient, roof_radius=roof_radius, bottom_thickness=bottom_thickness,
                  roof_slag_velocity=roof_slag_velocity(case, roof_volume > 0.0, horizontal),
                  return_upflow=return_upflow, exchange_rate=exchange_rate, turning_weight=turning_weight)
@@ -408,19 +407,13 @@ def bottom_layer(case: Case, channel_radius: float) -> float:
 
 def roof_layer(case: Case, channel_area: float, cells: int) -> tuple[float, np.ndarray, np.ndarray]:
     """(volume A_L delta [m^3], cloud coefficient (J,) [-], cloud length (J,) [m]) of the roof layer: the inlet
-    disk's area A_L times popbal.roof_thickness delta, with c_L and delta in the top cell and 0 below; volume 0 and
-    zero arrays without a roof layer. CaseError where the keys do not go together."""
+    disk's area A_L times its thickness delta (:func:`roof_thickness`), with c_L and delta in the top cell and 0
+    below; volume 0 and zero arrays without a roof layer. CaseError where the keys do not go together."""
     p, g = case.popbal, case.geometry
     coefficient, radius = np.zeros(cells), np.zeros(cells)
-    if p.roof_layer_coefficient is None and p.roof_thickness is None:
+    thickness = roof_thickness(case)
+    if thickness == 0.0:
         return 0.0, coefficient, radius
-    if p.roof_layer_coefficient is None or p.roof_thickness is None:
-        given = "roof_layer_coefficient" if p.roof_thickness is None else "roof_thickness"
-        raise CaseError(f"popbal.{given} = {getattr(p, given)!r}: needs the other of popbal.roof_layer_coefficient "
-                        "and popbal.roof_thickness; allowed: give both, or neither (no roof layer)")
-    if p.roof_thickness > g.height / 2:
-        raise CaseError(f"popbal.roof_thickness = {p.roof_thickness!r} m: allowed at most half the slag height "
-                        f"geometry.height = {g.height:g} m")
     if channel_area == 0.0 or p.channel_feed_fraction == 0.0:
         raise CaseError(f"popbal.roof_layer_coefficient = {p.roof_layer_coefficient!r}: the roof layer drains into the "
                         "channel and takes its feed; allowed only with a channel zone (popbal.channel_radius_factor "
@@ -428,8 +421,51 @@ def roof_layer(case: Case, channel_area: float, cells: int) -> tuple[float, np.n
     if p.feed_layer_thickness:
         raise CaseError(f"popbal.feed_layer_thickness = {p.feed_layer_thickness!r} m: the channel's feed layer and the "
                         "roof layer describe the same layer; allowed: one of them")
-    coefficient[-1], radius[-1] = p.roof_layer_coefficient, p.roof_thickness
-    return math.pi * (0.5 * g.inlet_diameter) ** 2 * p.roof_thickness, coefficient, radius
+    coefficient[-1], radius[-1] = p.roof_layer_coefficient, thickness
+    return math.pi * (0.5 * g.inlet_diameter) ** 2 * thickness, coefficient, radius
+
+
+def roof_thickness(case: Case) -> float:
+    """The roof layer's thickness delta [m]: popbal.roof_thickness ('fixed', the default form) or the drainage law's
+    (popbal.roof_thickness_form = 'drainage': :func:`popbal.closures.roof_drainage_thickness` with the matte feed
+    over the inlet disk, the Stokes velocity of the mean fed droplet and the slag's velocity through the roof); 0
+    without a roof layer. CaseError where the keys do not go together or the layer would fill half the height."""
+    p, g = case.popbal, case.geometry
+    drainage = p.roof_thickness_form == "drainage"
+    if drainage and p.roof_thickness is not None:
+        raise CaseError(f"popbal.roof_thickness = {p.roof_thickness!r}: roof_thickness_form = 'drainage' sets the "
+                        "thickness from popbal.roof_drainage_ratio; allowed: one of them")
+    if (p.roof_drainage_ratio is not None) != drainage:
+        raise CaseError(f"popbal.roof_drainage_ratio = {p.roof_drainage_ratio!r}: belongs to roof_thickness_form = "
+                        f"'drainage' (now {p.roof_thickness_form or 'fixed'!r}); allowed: both or neither")
+    given = p.roof_drainage_ratio if drainage else p.roof_thickness
+    name = "roof_drainage_ratio" if drainage else "roof_thickness"
+    if p.roof_layer_coefficient is None and given is None:
+        return 0.0
+    if p.roof_layer_coefficient is None or given is None:
+        other = name if p.roof_layer_coefficient is not None else "roof_layer_coefficient"
+        raise CaseError(f"popbal.{name if given is not None else 'roof_layer_coefficient'} = "
+                        f"{given if given is not None else p.roof_layer_coefficient!r}: needs popbal.{other}; "
+                        f"allowed: give popbal.roof_layer_coefficient and popbal.{name}, or neither (no roof layer)")
+    if drainage:
+        drho = case.matte.density - case.slag.density
+        mu = case.slag_viscosity
+        d = case.feed.mean_diameter
+        inlet = math.pi * (0.5 * g.inlet_diameter) ** 2
+        flux = case.feed.mass_rate / case.matte.density / inlet
+        stokes = drho * STANDARD_GRAVITY * d * d / (18.0 * mu)
+        slag = roof_slag_velocity(case, True, case.popbal.slag_flow == "horizontal")
+        try:
+            thickness = closures.roof_drainage_thickness(flux, stokes, p.roof_drainage_ratio, drho, mu,
+                                                         p.roof_layer_coefficient, STANDARD_GRAVITY, slag)
+        except ValueError as exc:
+            raise CaseError(f"popbal.roof_drainage_ratio = {p.roof_drainage_ratio!r}: {exc}") from None
+    else:
+        thickness = p.roof_thickness
+    if thickness > g.height / 2:
+        raise CaseError(f"popbal.{name} = {given!r}: the roof layer ({thickness:.4g} m thick) would fill more than "
+                        f"half the slag height geometry.height = {g.height:g} m")
+    return thickness
 
 
 def column_radius(case: Case) -> float:

@@ -261,8 +261,19 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                                 "(c_L drho g)) of matte per unit area at a feed flux j "
                                                 "(popbal.closures); absent: no roof layer.", 0.0,
                                         exclusive_minimum=True, optional=True),
-        "roof_thickness": Field(F, "m", "Thickness delta of the roof layer (needed with roof_layer_coefficient).",
-                                0.0, exclusive_minimum=True, optional=True),
+        "roof_thickness": Field(F, "m", "Thickness delta of the roof layer (needed with roof_layer_coefficient and "
+                                        "roof_thickness_form 'fixed').", 0.0, exclusive_minimum=True, optional=True),
+        "roof_thickness_form": Field(S, "", "How the roof layer's thickness is set (popbal.closures): 'fixed' "
+                                            "(popbal.roof_thickness) or 'drainage' (the layer's droplets leave it at "
+                                            "roof_drainage_ratio times the Stokes velocity U_s of the mean fed "
+                                            "droplet, so it holds the volume fraction j / (k U_s) and is "
+                                            "sqrt(mu k U_s (k U_s - w) / (c_L drho g j)) thick, w the slag's velocity "
+                                            "through the inlet); absent: 'fixed'.",
+                                     choices=("fixed", "drainage"), optional=True),
+        "roof_drainage_ratio": Field(F, "-", "k of roof_thickness_form = 'drainage': the roof layer's drainage "
+                                             "velocity over U_s, 2.3-2.8 in the resolved reference runs "
+                                             "(docs/guide/reduced-model.md).", 0.0, exclusive_minimum=True,
+                                     optional=True),
         "bottom_layer_factor": Field(F, "-", "The bottom layer: a well-mixed layer over the whole floor, of thickness "
                                              "h_b = bottom_layer_factor x the channel radius R_c (the plume's "
                                              "discharge spreads about one plume radius deep), that takes what leaves "

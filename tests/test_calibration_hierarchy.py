@@ -371,7 +371,7 @@ def _roof_reference(tmp_path, name="cubic"):
 def test_dilution_fit_recovers_the_law_and_its_scatter():
     """phi = k_R^-2 / (1 + Re / Re_d): exact data give k_R and Re_d back to round-off; 10 % log-normal scatter on
     twelve runs gives them within three of the fit's own standard errors, which shrink as 1 / sqrt(n)."""
-    from analysis.calibration.hierarchy import fit_dilution
+    from analysis.calibration.zones import fit_dilution
 
     reynolds = np.geomspace(0.3, 20.0, 12)
     phi = 1.0 / (4.9**2 * (1.0 + reynolds / 2.4))
@@ -391,7 +391,7 @@ def test_dilution_from_zones_reads_the_core_fraction_and_axis_velocity_of_each_r
     """Per run, phi_p is radius_factor_from_zones' core volume fraction, and Re = rho_s u R / mu with R = sqrt(Q /
     (pi phi_p u)) from the axis velocity of channel_profile.csv over the same band and window; a run whose R
     exceeds its inlet radius is left out with the reason."""
-    from analysis.calibration.hierarchy import (CORE_BAND, dilution_from_zones, radius_factor_from_zones)
+    from analysis.calibration.zones import CORE_BAND, dilution_from_zones, radius_factor_from_zones
     from analysis.steady import window_of as steady_window_of
     from settler.cases import load_case
 
@@ -427,7 +427,7 @@ def test_roof_coefficient_from_zones_counts_the_slag_that_flows_through_the_roof
     """The layers closures' c_L from cubic's zone diagnostics: j = phi (c_L phi drho g delta^2 / mu + w) with the
     slag feed's velocity w through the inlet disk (fulldem's velocity inlet), recomputed here from the files; and a
     roof the slag alone would carry is refused with the run named, not averaged in as NaN."""
-    from analysis.calibration.hierarchy import roof_from_zones
+    from analysis.calibration.zones import roof_from_zones
     from analysis.steady import window_of as steady_window_of
     from settler.cases import load_case
     from settler.physics import STANDARD_GRAVITY
@@ -450,6 +450,16 @@ def test_roof_coefficient_from_zones_counts_the_slag_that_flows_through_the_roof
     assert got["thickness"] == pytest.approx(thickness, rel=1e-12)
     without_slag = j * case.slag_viscosity / (drho * STANDARD_GRAVITY * (phi * thickness) ** 2)
     assert without_slag / got["per_run"]["cubic"] > 1.1  # the slag term matters in cubic (0.043 against 0.036)
+
+    # the drainage law's k = j / (phi_L U_s) only where the cells resolve the roof: not at cubic's 5 mm cells
+    assert got["drainage_per_run"] == {} and math.isnan(got["drainage_ratio"])
+    text = (folder / "case.toml").read_text()
+    (folder / "case.toml").write_text(text.replace(f"cell_size = {case.fulldem.cell_size!r}", "cell_size = 0.0025"))
+    u_s = drho * STANDARD_GRAVITY * case.feed.mean_diameter**2 / (18.0 * case.slag_viscosity)
+    resolved = roof_from_zones(["cubic"], tmp_path)
+    assert resolved["drainage_ratio"] == pytest.approx(j / (phi * u_s), rel=1e-9)
+    assert resolved["drainage_per_run"] == {"cubic": resolved["drainage_ratio"]}
+    (folder / "case.toml").write_text(text)
 
     # a roof so full that the slag alone would carry twice the feed through it: no c_L to measure
     zones.loc[:, "roof_volume_fraction"] *= 2.0 * j / (w * phi)
@@ -479,7 +489,7 @@ def test_cell_efficiency_is_the_kernel_runs_merges_over_its_cell_by_cell_collisi
     assert got["standard_error"] == pytest.approx(0.8 * math.sqrt(1.0 / 100.0 + 0.05**2), rel=1e-12)
     assert got["merges"] == 100 and got["expected_collisions"] == 125.0 and got["form"] == "cell"
     assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution", "zones_floor",
-                                                                                    "zones_line"]
+                                                                                    "zones_line", "zones_drain"]
 
 
 def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
@@ -496,7 +506,7 @@ def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
     from pathlib import Path
 
     from analysis.band_efficiency import COLLISIONS_FILE, COLLISIONS_UNITS
-    from analysis.calibration.hierarchy import roof_kernel_from_collisions
+    from analysis.calibration.zones import roof_kernel_from_collisions
     from settler.cases import load_case
     from settler.output import units_line
 
@@ -622,7 +632,7 @@ def test_channel_kernel_from_the_collisions_by_height_of_a_run(tmp_path):
     from pathlib import Path
 
     from analysis.band_efficiency import COLLISIONS_FILE, COLLISIONS_UNITS
-    from analysis.calibration.hierarchy import channel_kernel_from_collisions
+    from analysis.calibration.zones import channel_kernel_from_collisions
     from settler.cases import load_case
     from settler.output import units_line
 
@@ -662,15 +672,18 @@ def test_channel_kernel_from_the_collisions_by_height_of_a_run(tmp_path):
         channel_kernel_from_collisions(["a"], tmp_path, values)
 
 
-@pytest.mark.parametrize("closures", ["zones_floor", "zones_line"])
+@pytest.mark.parametrize("closures", ["zones_floor", "zones_line", "zones_drain"])
 def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_the_coalescing_whole_runs(
         tmp_path, monkeypatch, closures):
     """'zones_floor': the coalescence-off transport runs' floors fill, so level 2 fits the channel coefficient alone
     with no bottom layer, and level 3 holds f_b = the geometric mean of delta_b / R_c over its coalescing runs only
     (a coalescence-off run in the whole level is left out), at level 2's channel coefficient; the layer writes it.
     'zones_line' is the same with popbal.plume_law = 'line_force' in every level and in the layer, its level 2 scored
-    on the mean diameter and axis velocity alone (the filling floors' count and flux left out). The measured-zone
-    steps and the fits are stubbed (tested above); this is the order and the choice of runs."""
+    on the mean diameter and axis velocity alone (the filling floors' count and flux left out). 'zones_drain' is
+    'zones_line' with the roof's thickness from the drainage law: the layer and every level carry the form and the
+    measured k in place of a thickness, and the roof's kernel is measured at each whole run's own law thickness
+    (popbal's, recomputed here). The measured-zone steps and the fits are stubbed (tested above); this is the order
+    and the choice of runs."""
     import tomllib
     from pathlib import Path
 
@@ -711,13 +724,20 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
                                                                    "correlation": 0.5, "rms": 0.1,
                                                                    "per_run": {}, "excluded": {}})
     monkeypatch.setattr(h, "roof_from_zones", lambda runs, d: {"coefficient": 0.05, "thickness": 0.006,
-                                                               "per_run": {}, "runs": list(runs)})
-    monkeypatch.setattr(h, "roof_kernel_from_collisions", lambda runs, d, thickness: {
-        "efficiency": 1.9, "shear_coefficient": 3.0, "per_run": {}, "runs": list(runs)})
+                                                               "per_run": {}, "runs": list(runs),
+                                                               "drainage_ratio": 2.5,
+                                                               "drainage_per_run": {r: 2.5 for r in runs}})
+    kernel_thickness = {}
+
+    def roof_kernel(runs, d, thickness):
+        kernel_thickness["value"] = thickness
+        return {"efficiency": 1.9, "shear_coefficient": 3.0, "per_run": {}, "runs": list(runs)}
+
+    monkeypatch.setattr(h, "roof_kernel_from_collisions", roof_kernel)
     monkeypatch.setattr(h, "load_target", lambda run, d, seed: run)
     monkeypatch.setattr(h, "fit_level", fit_level)
     result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures=closures)
-    law = "line_force" if closures == "zones_line" else None
+    law = None if closures == "zones_floor" else "line_force"
     assert fixed_at["transport"].get("popbal.plume_law") == law and fixed_at["whole"].get("popbal.plume_law") == law
     assert columns_at["whole"] == tuple(h.TARGET_COLUMNS)
     assert columns_at["transport"] == (("mean_diameter", "channel_velocity") if law else tuple(h.TARGET_COLUMNS))
@@ -736,6 +756,25 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
     assert layer["popbal"]["bottom_layer_factor"] == pytest.approx(expected, rel=1e-12)
     assert "bottom layer from the floor layers: f_b" in result.summary()
     assert layer["popbal"].get("plume_law") == law and layer["popbal"]["confinement"] is True
+    if closures != "zones_drain":
+        assert kernel_thickness["value"] == 0.006 and fixed_at["whole"]["popbal.roof_thickness"] == 0.006
+        assert "roof_thickness_form" not in layer["popbal"] and layer["popbal"]["roof_thickness"] == 0.006
+        return
+    for level in ("transport", "whole"):
+        assert fixed_at[level]["popbal.roof_thickness_form"] == "drainage" and "popbal.roof_thickness" not in \
+            fixed_at[level] and fixed_at[level]["popbal.roof_drainage_ratio"] == 2.5
+    assert layer["popbal"]["roof_thickness_form"] == "drainage" and layer["popbal"]["roof_drainage_ratio"] == 2.5
+    assert "roof_thickness" not in layer["popbal"]
+    # the kernel at each whole run's own law thickness: delta = k U_s sqrt(mu / (c_L drho g j)) (no slag feed)
+    g = 9.80665
+    for run in ("a", "b"):
+        case = load_case(tmp_path / run / "case.toml")
+        drho, mu = case.matte.density - case.slag.density, case.slag_viscosity
+        u_s = drho * g * case.feed.mean_diameter**2 / (18.0 * mu)
+        j = case.feed.mass_rate / case.matte.density / (math.pi * (0.5 * case.geometry.inlet_diameter) ** 2)
+        assert kernel_thickness["value"][run] == pytest.approx(2.5 * u_s * math.sqrt(mu / (0.05 * drho * g * j)),
+                                                                rel=1e-9)
+    assert kernel_thickness["value"]["b"] / kernel_thickness["value"]["a"] == pytest.approx(math.sqrt(2.0), rel=1e-9)
 
 
 def test_a_layer_names_the_reference_set_engine_it_was_fitted_to():

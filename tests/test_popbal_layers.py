@@ -184,6 +184,68 @@ def test_layer_keys_that_do_not_go_together_are_refused(overrides, names):
         popbal.setup("demo", overrides)
 
 
+
+# --- the roof's drainage law (popbal.roof_thickness_form = "drainage", popbal.roof_drainage_ratio): the layer's
+# droplets leave it at k U_s, so fed at j it holds phi_L = j / (k U_s) and the cloud law's inventory I sets delta
+
+K_DRAIN = 2.4  # roof_drainage_ratio [-] (chosen for the test; the resolved reference runs give 2.3-2.8)
+DRAINAGE = [f"popbal.roof_layer_coefficient={C_L}", "popbal.roof_thickness_form=drainage",
+            f"popbal.roof_drainage_ratio={K_DRAIN}"]
+
+
+def _stokes(case):
+    d = case.feed.mean_diameter
+    return (case.matte.density - case.slag.density) * STANDARD_GRAVITY * d * d / (18.0 * case.slag_viscosity)
+
+
+@pytest.mark.parametrize("preset", ["demo", "cubic"])  # without and with slag through the roof
+def test_drainage_law_sets_the_thickness_that_holds_j_over_k_us(preset):
+    """The law's thickness, solved here from j = phi_L (c_L phi_L drho g delta^2 / mu + w) at phi_L = j / (k U_s),
+    is the model's, and the cloud law's inventory over it is phi_L (the dilute balance of :func:`roof_inventory`)."""
+    model = popbal.setup(preset, SINGLE_SIZE[:3] + DRAINAGE + ["popbal.channel_radius_form=flux",
+                                                              "popbal.channel_radius_factor=4.6"])
+    case = model.case
+    inlet = math.pi * model.inlet_radius**2
+    j = case.feed.mass_rate / case.matte.density / inlet
+    w = model.roof_slag_velocity
+    drho = case.matte.density - case.slag.density
+    phi = j / (K_DRAIN * _stokes(case))
+    delta = brentq(lambda d: phi * (C_L * phi * drho * STANDARD_GRAVITY * d * d / model.viscosity + w) - j,
+                   1e-6, 0.5 * case.geometry.height, xtol=1e-15)
+    print(f"\n{preset}: drainage law delta {model.roof_thickness * 1e3:.4f} mm against {delta * 1e3:.4f} mm, phi_L "
+          f"{phi:.4g}, slag through the roof {w * 1e3:.3f} mm/s")
+    assert (w > 0.0) == (preset == "cubic")
+    assert model.roof_thickness == pytest.approx(delta, rel=1e-9)
+    inventory = roof_inventory(j, drho, model.viscosity, C_L, STANDARD_GRAVITY, w, model.roof_thickness)
+    assert inventory / model.roof_thickness == pytest.approx(phi, rel=1e-12)
+    assert model.zone_area[ROOF] * model.cell_height == pytest.approx(inlet * delta, rel=1e-9)
+
+
+def test_drainage_law_thins_the_roof_as_the_feed_grows():
+    """Without slag feed delta = k U_s sqrt(mu / (c_L drho g j)): half at four times the feed, and at twice the
+    viscosity U_s sqrt(mu) falls by sqrt(2), as the resolved runs' roofs thin from 5 to 2.5 mm over a fourfold
+    Kynch ratio."""
+    def thickness(extra):
+        return popbal.setup("demo", DRAINAGE + ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6"]
+                            + extra).roof_thickness
+    base = thickness([])
+    assert thickness(["feed.mass_rate=8.6e-3"]) / base == pytest.approx(0.5, rel=1e-9)
+    assert thickness(["slag.viscosity_reference=0.9"]) / base == pytest.approx(2.0**-0.5, rel=1e-6)
+
+
+@pytest.mark.parametrize("overrides, names", [
+    (DRAINAGE + [f"popbal.roof_thickness={DELTA}"], "one of them"),
+    ([f"popbal.roof_layer_coefficient={C_L}", f"popbal.roof_thickness={DELTA}", "popbal.roof_drainage_ratio=2.4"],
+     "both or neither"),
+    (DRAINAGE[1:], "needs popbal.roof_layer_coefficient"),
+    (DRAINAGE[:2], "both or neither"),
+    (DRAINAGE[:2] + ["popbal.roof_drainage_ratio=0.001"], "carries the layer away"),
+])
+def test_drainage_keys_that_do_not_go_together_are_refused(overrides, names):
+    preset = "cubic" if "0.001" in overrides[-1] else "demo"  # cubic's slag flows through its roof
+    with pytest.raises(CaseError, match=names):
+        popbal.setup(preset, overrides + ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6"])
+
 # --- the layers' own kernels and the floor's drainage (popbal.roof_collision_efficiency, roof_shear_coefficient,
 # bottom_drain_coefficient): the zone diagnostics of the reference runs measure them apart from the channel's
 

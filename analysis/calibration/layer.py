@@ -71,17 +71,24 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
                      f"{k_r['standard_errors']['plume_dilution_reynolds']:.3g}")
     if result.roof:
         r = result.roof
-        lines += [f"roof_layer_coefficient = {r['coefficient']!r}  # - [derived] the geometric mean of "
-                  f"j mu / (drho g I^2) over the roof layers of {', '.join(r['runs'])} (zones.csv)",
-                  f"roof_thickness = {r['thickness']!r}  # m [derived] the mean roof thickness of "
-                  f"{', '.join(r['runs'])}"]
+        lines.append(f"roof_layer_coefficient = {r['coefficient']!r}  # - [derived] the geometric mean of "
+                     f"j mu / (drho g I^2) over the roof layers of {', '.join(r['runs'])} (zones.csv)")
+        if CLOSURES[result.closures].get("drainage"):
+            lines += ["roof_thickness_form = \"drainage\"  # [chosen] the roof's thickness from the drainage law",
+                      f"roof_drainage_ratio = {r['drainage_ratio']!r}  # - [derived] the geometric mean of "
+                      f"j delta / (I U_s) over the roof layers of {', '.join(r['drainage_per_run'])} (zones.csv; "
+                      "cells that resolve the roof)"]
+        else:
+            lines.append(f"roof_thickness = {r['thickness']!r}  # m [derived] the mean roof thickness of "
+                         f"{', '.join(r['runs'])}")
         if "kernel" in r:
             k = r["kernel"]
             lines += [f"roof_collision_efficiency = {k['efficiency']!r}  # - [derived] the geometric mean of the "
                       "top band's merges under the inlet over its well-mixed collisions carried over to the roof "
-                      f"layer at roof_thickness, in {', '.join(k['runs'])} (collisions_by_height.csv, zones.csv)",
+                      f"layer at popbal's roof thickness, in {', '.join(k['runs'])} (collisions_by_height.csv, "
+                      "zones.csv)",
                       f"roof_shear_coefficient = {k['shear_coefficient']!r}  # - [derived] the geometric mean of "
-                      f"the shear rate there times roof_thickness over the layer's drainage velocity, in "
+                      f"the shear rate there times popbal's roof thickness over the layer's drainage velocity, in "
                       f"{', '.join(k['runs'])}"]
     if result.floor:
         f = result.floor

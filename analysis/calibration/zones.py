@@ -1,0 +1,305 @@
+"""The closures the hierarchical calibration measures in the reference runs' zone diagnostics rather than fits
+(SI units): the plume's radius factor and dilution law (``zone_profile.csv``, ``channel_profile.csv``), the roof
+layer's law, its drainage law and its kernel (``zones.csv``, ``collisions_by_height.csv``) and the channel's kernel,
+each from named stored runs and never from a hold-out (:mod:`analysis.calibration.hierarchy` passes the runs).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+#: Largest cell size [m] at which a run's roof layer counts for the drainage law's k: the zone diagnostics count the
+#: roof in slices one cell high, and at 5 mm cells every roof is one or two cells thick (its volume fraction the
+#: cell's: j / (phi_L U_s) 2.8-9.4 against 2.3-2.8 at 3.3 and 2.5 mm cells, docs/guide/reduced-model.md). [chosen]
+ROOF_RESOLVED_CELL = 3.4e-3
+#: Height band [-, of the column height] over which the core volume fraction is averaged for k_R.
+CORE_BAND = (0.3, 0.7)
+
+
+def _core_band(folder: Path, table: str) -> pd.DataFrame:
+    """The rows of a stored run's ``table`` (zone_profile.csv or channel_profile.csv) in the :data:`CORE_BAND` of the
+    height over the run's steady window."""
+    from analysis.runs import load_run
+
+    from .targets import window_of
+
+    profile = pd.read_csv(folder / table, comment="#")
+    (start, end), _ = window_of(load_run(folder).timeseries)
+    height = float(profile["z"].max() + profile["z"].min())  # cell centres: first + last = the height
+    return profile[(profile["time"] > start) & (profile["z"] >= CORE_BAND[0] * height)
+                   & (profile["z"] <= CORE_BAND[1] * height)]
+
+
+def radius_factor_from_zones(runs, reference_dir: str | Path) -> dict:
+    """k_R = phi_p^(-1/2) [-] from the plume core's volume fraction phi_p (``zone_profile.csv``: the mean of
+    core_volume_fraction over the :data:`CORE_BAND` of the height and the runs' steady windows)."""
+    fractions = [float(_core_band(Path(reference_dir) / run, "zone_profile.csv")["core_volume_fraction"].mean())
+                 for run in runs]
+    phi = float(np.mean(fractions))
+    return {"value": phi ** -0.5, "core_fraction": phi, "runs": list(runs)}
+
+
+def dilution_from_zones(runs, reference_dir: str | Path) -> dict:
+    """The plume's dilution law phi_p = k_R^-2 / (1 + Re / Re_d) (popbal.closures, ``plume_dilution_reynolds``)
+    from the zone diagnostics of ``runs``: per run the core volume fraction phi_p (as :func:`radius_factor_from_zones`)
+    and the slag's axis velocity u (``channel_profile.csv``, the same band and window), the radius R = sqrt(Q_ch /
+    (pi phi_p u)) that carries the feed at them and Re = rho_s u R / mu; k_R and Re_d by least squares in log phi_p,
+    with standard errors and their correlation from the residuals' scatter. A run whose R exceeds its inlet radius is
+    left out (``excluded``): its plume fills the feed's disk, which popbal caps, and measures the cap, not the law.
+    Returns {"value": k_R, "core_fraction": k_R^-2, "reynolds": Re_d, "standard_errors": {...}, "correlation",
+    "rms" (of the log residuals), "per_run": {run: (phi_p, Re)}, "excluded": {run: why}, "runs"}."""
+    from popbal.closures import plume_reynolds
+    from settler.cases import load_case
+
+    per_run, excluded = {}, {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        phi = float(_core_band(folder, "zone_profile.csv")["core_volume_fraction"].mean())
+        u = float(_core_band(folder, "channel_profile.csv")["channel_velocity"].mean())
+        case = load_case(folder / "case.toml")
+        flux = case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
+        radius = math.sqrt(flux / (math.pi * phi * u))
+        if radius > 0.5 * case.geometry.inlet_diameter:
+            excluded[run] = (f"R {radius * 1e3:.3g} mm over the inlet radius "
+                             f"{case.geometry.inlet_diameter * 500:.3g} mm")
+            continue
+        per_run[run] = (phi, plume_reynolds(u, radius, case.slag.density, case.slag_viscosity))
+    if len(per_run) < 3:
+        raise ValueError(f"the dilution law needs the zones of at least 3 runs whose plume is narrower than the inlet; "
+                         f"got {', '.join(per_run) or 'none'} (left out: {excluded or 'none'})")
+    phi, reynolds = (np.array(v) for v in zip(*per_run.values()))
+    return {**fit_dilution(phi, reynolds), "per_run": {r: (float(a), float(b)) for r, (a, b) in per_run.items()},
+            "excluded": excluded, "runs": list(per_run)}
+
+
+def fit_dilution(phi, reynolds) -> dict:
+    """k_R and Re_d of phi = k_R^-2 / (1 + Re / Re_d) from volume fractions ``phi`` and Reynolds numbers
+    ``reynolds`` (arrays, n >= 3) by least squares in log phi; standard errors (``standard_errors``, by [popbal]
+    key) and their ``correlation`` from the residuals' scatter, ``rms`` of the log residuals."""
+    from scipy.optimize import least_squares
+
+    phi, reynolds = np.asarray(phi, dtype=float), np.asarray(reynolds, dtype=float)
+    fit = least_squares(lambda x: x[0] - np.log1p(reynolds / np.exp(x[1])) - np.log(phi),
+                        [math.log(float(phi.max())), 0.0], xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    dof = len(phi) - 2
+    covariance = np.linalg.pinv(fit.jac.T @ fit.jac) * (2.0 * fit.cost / dof if dof > 0 else math.nan)
+    se = np.sqrt(np.diag(covariance))
+    phi0, re_d = math.exp(fit.x[0]), math.exp(fit.x[1])
+    with np.errstate(invalid="ignore", divide="ignore"):  # runs of one Reynolds number: no correlation to give
+        correlation = float(covariance[0, 1] / (se[0] * se[1]))
+    return {"value": phi0 ** -0.5, "core_fraction": phi0, "reynolds": re_d,
+            # relative errors of phi0 and Re_d are the log parameters' standard errors; k_R's is half phi0's
+            "standard_errors": {"channel_radius_factor": 0.5 * se[0] * phi0 ** -0.5,
+                                "plume_dilution_reynolds": se[1] * re_d},
+            "correlation": correlation, "rms": float(np.sqrt(np.mean(fit.fun ** 2)))}
+
+
+def _roof_layer(folder: Path, start: float, end: float) -> tuple[float, float]:
+    """(mean roof thickness delta [m], matte per unit area I = mean(thickness x volume fraction) [m]) of the roof
+    layer in a stored run's ``zones.csv`` over ``start``-``end`` [s]."""
+    zones = pd.read_csv(Path(folder) / "zones.csv", comment="#")
+    rows = zones[(zones["time"] >= start) & (zones["time"] <= end)]
+    return (float(rows["roof_thickness"].mean()),
+            float((rows["roof_thickness"] * rows["roof_volume_fraction"].fillna(0.0)).mean()))
+
+
+def roof_from_zones(runs, reference_dir: str | Path) -> dict:
+    """The roof law's c_L [-] and thickness delta [m] from the roof layer of the zone diagnostics (``zones.csv``):
+    per run, over its steady window, the matte volume per unit area I = mean(roof_thickness x roof_volume_fraction)
+    and c_L = (j - w I / delta) mu / (drho g I^2) (popbal.closures.roof_coefficient, j the matte feed over the inlet
+    disk, w the slag feed's velocity through it, delta the run's mean roof thickness); c_L the geometric mean over
+    the runs, delta the mean thickness. The drainage law's k = j delta / (I U_s) (the layer's drainage velocity over
+    the Stokes velocity U_s of the mean fed droplet, :func:`popbal.closures.roof_drainage_thickness`): the geometric
+    mean over the runs whose cells resolve the roof (at most :data:`ROOF_RESOLVED_CELL`; per run in
+    "drainage_per_run"), NaN where none does."""
+    from analysis.runs import load_run
+    from popbal.closures import roof_coefficient
+    from popbal.model import roof_slag_velocity
+    from settler.cases import load_case
+
+    from .targets import window_of
+
+    from analysis.groups import design_groups
+
+    per_run, thickness, drainage = {}, [], {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        (start, end), _ = window_of(load_run(folder).timeseries)
+        mean_thickness, inventory = _roof_layer(folder, start, end)
+        case = load_case(folder / "case.toml")
+        inlet = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
+        flux = case.feed.mass_rate / case.matte.density / inlet
+        if case.fulldem.cell_size <= ROOF_RESOLVED_CELL and inventory > 0.0:
+            drainage[run] = flux * mean_thickness / (inventory * design_groups(case)["stokes_velocity"])
+        slag = roof_slag_velocity(case, roof=True, horizontal=case.popbal.slag_flow == "horizontal")
+        thickness.append(mean_thickness)
+        per_run[run] = roof_coefficient(flux, inventory, case.matte.density - case.slag.density, case.slag_viscosity,
+                                        slag_velocity=slag, thickness=thickness[-1])
+        if not per_run[run] > 0.0:
+            raise ValueError(f"{folder}: its roof layer (matte {inventory:.3g} m per unit area, {thickness[-1]:.3g} m "
+                             f"thick) is carried by the slag feed alone ({slag:.3g} m/s through the inlet against "
+                             f"the matte's {flux:.3g} m/s): no cloud drainage to measure c_L from; leave the run out "
+                             "of the level or use a closure set without a roof layer")
+    coefficient = float(np.exp(np.mean(np.log(list(per_run.values())))))
+    return {"coefficient": coefficient, "thickness": float(np.mean(thickness)), "per_run": per_run, "runs": list(runs),
+            "drainage_ratio": float(np.exp(np.mean(np.log(list(drainage.values()))))) if drainage else math.nan,
+            "drainage_per_run": drainage}
+
+
+def _collisions_with_shear(folder: Path, needs: str):
+    """(table, meta) of a stored run's collisions by height (:func:`analysis.band_efficiency.read_collisions`) with
+    its well-mixed shear columns; FileNotFoundError naming the file and what ``needs`` it where either is missing."""
+    from analysis.band_efficiency import COLLISIONS_FILE, read_collisions
+
+    path = folder / COLLISIONS_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{folder}: no {COLLISIONS_FILE} (stored runs measure it when made with "
+                                f"merges_by_height.csv, a04ea13 or later); {needs} needs it")
+    table, meta = read_collisions(path)
+    if "mixed_shear_under_inlet" not in table:
+        raise FileNotFoundError(f"{path}: no well-mixed shear collisions (stored before 2026-12-05); store the "
+                                "run again from its run folder (python -m analysis.reference_set)")
+    return table, meta
+
+
+def law_roof_thickness(case_file, fixed: dict) -> float:
+    """popbal's roof thickness [m] in the case of ``case_file`` under the [popbal] overrides ``fixed`` (its own
+    calibration layer set aside, as the fit scores it): :func:`popbal.model.roof_thickness`."""
+    from popbal.model import roof_thickness
+    from settler.cases import NO_CALIBRATION, load_case
+
+    keys = {k: v for k, v in fixed.items() if k.startswith("popbal.roof_")}
+    return roof_thickness(load_case(case_file, {"case.calibration": NO_CALIBRATION, **keys}))
+
+
+def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: float | dict | None = None) -> dict:
+    """The roof layer's own kernel [-] as popbal's roof applies it, from each full run's zone diagnostics over the
+    window of its collisions by height (``collisions_by_height.csv``, measured over the steady window when the run
+    was stored; :mod:`analysis.band_efficiency`), in the top band under the inlet (the disk of area A):
+
+    - the layer, as popbal's: matte per unit area I, the mean of ``zones.csv``'s roof_thickness x
+      roof_volume_fraction over the window (as :func:`roof_from_zones`), so that the layer holds the share
+      f = I A / V_b of the band's matte V_b (at most 1; the rest is plume below it), over popbal's thickness delta
+      (``thickness`` [m], the one popbal's roof will have: the calibration passes the layers' delta, or {run:
+      delta} where popbal's roof thickness is a law; None: each run's own mean roof_thickness), so that popbal's roof
+      holding the run's I collides and drains as the run's;
+    - efficiency E_L = merges / C_L, with C_L = (C_g + C_s) f^2 h_b / delta the band's well-mixed gravitational and
+      shear collisions (the latter at the slag's shear rate at its droplets) carried over to the layer's droplets mixed
+      over its own volume A delta (a pair sum scales as the droplets squared, at the band's size distribution) from
+      the band's A h_b (h_b the band's height): popbal's roof collides its droplets mixed over A delta;
+    - shear coefficient G delta / u_L, G the slag's shear rate at the band's droplets and u_L = j delta / I - w the
+      layer's own drainage velocity from its balance j = (I / delta) (u_L + w) (j the matte fed over the inlet, w the
+      slag feed's velocity through it; popbal.closures): popbal shears its roof at G = roof_shear_coefficient u_L /
+      delta.
+
+    Each the geometric mean over the runs; per run in "per_run". A run without the table, without the well-mixed
+    shear columns, without merges or shear in its top band, or whose roof the slag alone would carry is refused by
+    name, and so is an empty list of runs."""
+    from analysis.band_efficiency import COLLISIONS_FILE
+    from popbal.model import roof_slag_velocity
+    from settler.cases import load_case
+
+    if not runs:
+        raise ValueError("the roof kernel needs at least one run with coalescence and a roof among the whole level's "
+                         "stored runs; none is stored")
+    per_run = {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        path = folder / COLLISIONS_FILE
+        table, meta = _collisions_with_shear(folder, "the roof kernel")
+        top = table.iloc[int(np.argmax(table["z"].to_numpy()))]
+        if not math.isfinite(top["mixed_shear_under_inlet"]) or not math.isfinite(top["shear_rate_under_inlet"]):
+            raise ValueError(f"{path}: no slag shear rate in the top band under the inlet (measured without the whole "
+                             "slag grid); the roof kernel needs it")
+        if not (top["merges_under_inlet"] > 0 and top["mixed_under_inlet"] + top["mixed_shear_under_inlet"] > 0):
+            raise ValueError(f"{path}: no merges or no collisions in the top band under the inlet; the roof kernel "
+                             "needs runs with coalescence and a roof")
+        case = load_case(folder / "case.toml")
+        own, inventory = _roof_layer(folder, *meta["window"])
+        delta = own if thickness is None else float(thickness[run] if isinstance(thickness, dict) else thickness)
+        area = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
+        band = case.geometry.height / len(table)
+        share = min(inventory * area / float(top["volume_under_inlet"]), 1.0)
+        collisions = float(top["mixed_under_inlet"] + top["mixed_shear_under_inlet"]) * share**2 * band / delta
+        flux = case.feed.mass_rate / case.matte.density / area
+        slag = roof_slag_velocity(case, roof=True, horizontal=case.popbal.slag_flow == "horizontal")
+        drainage = flux * delta / inventory - slag
+        if not drainage > 0.0:
+            raise ValueError(f"{folder}: its roof layer (matte {inventory:.3g} m per unit area, {delta:.3g} m "
+                             f"thick) is carried by the slag feed alone; no drainage velocity to scale its shear by")
+        rate = float(top["shear_rate_under_inlet"])
+        per_run[run] = {"efficiency": float(top["merges_under_inlet"]) / collisions,
+                        "shear_coefficient": rate * delta / drainage, "shear_rate": rate, "thickness": own,
+                        "share": share, "drainage_velocity": drainage}
+
+    def mean(key):
+        return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
+
+    return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
+            "runs": list(runs), "thickness": thickness}
+
+
+def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict | None = None) -> dict:
+    """The plume channel's own kernel [-] as popbal's channel would apply it, from each full run's zone diagnostics
+    (``collisions_by_height.csv``, over the steady window it was stored with; :mod:`analysis.band_efficiency`) in the
+    bands between the top one (the roof's) and the bottom one (the floor's, popbal's bottom layer), under the inlet
+    (its disk or slot extended down, area A_in):
+
+    - popbal's channel at the [popbal] ``values`` (dotted keys, e.g. {"popbal.channel_radius_factor": 4.94}, on
+      each run's own case.toml, with its calibration layer set aside): its radius R_c, plume velocity u_s and
+      transport factor t (:func:`popbal.model.channel_closure`);
+    - efficiency E_ch = merges / C_ch, C_ch = (C_g + C_s) A_in / (pi R_c^2): the bands' gravitational and shear
+      collisions of the droplets well mixed under the inlet (the shear at the slag's own rate at them) carried over
+      to the droplets mixed over the channel's section, as popbal's channel holds them (a pair sum scales as the
+      inverse of the volume);
+    - shear coefficient G R_c / (t u_s), G the slag's shear rate at the bands' droplets (mean over the bands weighted
+      by the droplets held): popbal shears its channel at G = shear_coefficient t u_s / R_c;
+    - collision radius sqrt(A_in / pi) sqrt(C_g,mixed / C_g,cell) [m]: the radius of the disk over which the bands'
+      droplets, well mixed, would collide as often as they do cell by cell (how compact the plume keeps them), and
+      the cell-by-cell efficiency merges / C_g,cell.
+
+    E_ch and the shear coefficient as geometric means over the runs; per run in "per_run". A run without the table,
+    its well-mixed shear columns or merges between the top and bottom bands is refused by name, as is an empty list
+    of runs."""
+    from analysis.band_efficiency import COLLISIONS_FILE
+    from fulldem.boundaries import Inlet
+    from popbal.model import channel_closure
+    from settler.cases import NO_CALIBRATION, load_case
+
+    if not runs:
+        raise ValueError("the channel kernel needs at least one stored run with coalescence; none was given")
+    per_run = {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        path = folder / COLLISIONS_FILE
+        table, _ = _collisions_with_shear(folder, "the channel kernel")
+        below = table.sort_values("z").iloc[1:-1]
+        merges = float(below["merges_under_inlet"].sum())
+        mixed = float(below["mixed_under_inlet"].sum())
+        mixed_shear = float(below["mixed_shear_under_inlet"].sum())
+        cell = float(below["gravitational_under_inlet"].sum())
+        if not (merges > 0.0 and mixed > 0.0 and cell > 0.0 and math.isfinite(mixed_shear)):
+            raise ValueError(f"{path}: no merges, collisions or shear rate under the inlet between the top and "
+                             "bottom bands; the channel kernel needs a run with coalescence measured on its whole "
+                             "slag grid")
+        case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION, **(values or {})})
+        g = case.geometry
+        radius, velocity, _, transport = channel_closure(case)
+        inlet = Inlet(tuple(case.inlet_center), 0.5 * g.inlet_diameter, g.height, g.inlet_length or 0.0).area
+        collisions = (mixed + mixed_shear) * inlet / (math.pi * radius**2)
+        held = below["held"].to_numpy()
+        rate = float(np.average(below["shear_rate_under_inlet"].to_numpy(), weights=held))
+        per_run[run] = {"efficiency": merges / collisions, "shear_coefficient": rate * radius / (transport * velocity),
+                        "shear_rate": rate, "channel_radius": radius, "plume_velocity": velocity,
+                        "collision_radius": math.sqrt(inlet / math.pi * mixed / cell),
+                        "cell_efficiency": merges / cell}
+
+    def mean(key):
+        return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
+
+    return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
+            "runs": list(runs)}
