@@ -435,18 +435,22 @@ def roof_thickness(case: Case) -> float:
     if drainage and p.roof_thickness is not None:
         raise CaseError(f"popbal.roof_thickness = {p.roof_thickness!r}: roof_thickness_form = 'drainage' sets the "
                         "thickness from popbal.roof_drainage_ratio; allowed: one of them")
-    if (p.roof_drainage_ratio is not None) != drainage:
+    if drainage and p.roof_drainage_ratio is None:
+        raise CaseError("popbal.roof_thickness_form = 'drainage': needs popbal.roof_drainage_ratio (k, 2.3-2.8 in the "
+                        "resolved reference runs); allowed: give it, or the form 'fixed' with popbal.roof_thickness")
+    if not drainage and p.roof_drainage_ratio is not None:
         raise CaseError(f"popbal.roof_drainage_ratio = {p.roof_drainage_ratio!r}: belongs to roof_thickness_form = "
-                        f"'drainage' (now {p.roof_thickness_form or 'fixed'!r}); allowed: both or neither")
+                        f"'drainage' (now {p.roof_thickness_form or 'fixed'!r}); allowed: set that form, or leave the "
+                        "ratio out")
     given = p.roof_drainage_ratio if drainage else p.roof_thickness
     name = "roof_drainage_ratio" if drainage else "roof_thickness"
     if p.roof_layer_coefficient is None and given is None:
         return 0.0
-    if p.roof_layer_coefficient is None or given is None:
-        other = name if p.roof_layer_coefficient is not None else "roof_layer_coefficient"
-        raise CaseError(f"popbal.{name if given is not None else 'roof_layer_coefficient'} = "
-                        f"{given if given is not None else p.roof_layer_coefficient!r}: needs popbal.{other}; "
-                        f"allowed: give popbal.roof_layer_coefficient and popbal.{name}, or neither (no roof layer)")
+    allowed = f"allowed: give popbal.roof_layer_coefficient and popbal.{name}, or neither (no roof layer)"
+    if p.roof_layer_coefficient is None:
+        raise CaseError(f"popbal.{name} = {given!r}: needs popbal.roof_layer_coefficient; {allowed}")
+    if given is None:
+        raise CaseError(f"popbal.roof_layer_coefficient = {p.roof_layer_coefficient!r}: needs popbal.{name}; {allowed}")
     if drainage:
         drho = case.matte.density - case.slag.density
         mu = case.slag_viscosity

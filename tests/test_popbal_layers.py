@@ -236,9 +236,9 @@ def test_drainage_law_thins_the_roof_as_the_feed_grows():
 @pytest.mark.parametrize("overrides, names", [
     (DRAINAGE + [f"popbal.roof_thickness={DELTA}"], "one of them"),
     ([f"popbal.roof_layer_coefficient={C_L}", f"popbal.roof_thickness={DELTA}", "popbal.roof_drainage_ratio=2.4"],
-     "both or neither"),
+     "belongs to roof_thickness_form = 'drainage' \\(now 'fixed'\\)"),
     (DRAINAGE[1:], "needs popbal.roof_layer_coefficient"),
-    (DRAINAGE[:2], "both or neither"),
+    (DRAINAGE[:2], "'drainage': needs popbal.roof_drainage_ratio"),
     (DRAINAGE[:2] + ["popbal.roof_drainage_ratio=0.001"], "carries the layer away"),
 ])
 def test_drainage_keys_that_do_not_go_together_are_refused(overrides, names):
