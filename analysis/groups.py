@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import sys
 
-from settler.physics import STANDARD_GRAVITY
+from settler.physics import STANDARD_GRAVITY, stokes_velocity
 
 #: Richardson-Zaki exponent and the peak of its settling flux phi (1 - phi)^n: 0.0715 U_s at phi = 1 / (n + 1).
 RICHARDSON_ZAKI = 4.65
@@ -62,7 +62,7 @@ def design_groups(case) -> dict[str, float]:
     mu, rho_s, rho_m = case.slag_viscosity, case.slag.density, case.matte.density
     d = case.feed.mean_diameter
     drho = rho_m - rho_s
-    u_s = drho * g * d * d / (18.0 * mu)
+    u_s = stokes_velocity(d, rho_m, rho_s, mu, g)
     a = 0.5 * case.geometry.inlet_diameter
     q = case.feed.mass_rate / rho_m
     from popbal.model import column_radius

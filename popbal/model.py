@@ -23,7 +23,7 @@ import numpy as np
 from settler.cases import Case, CaseError, case_with_overrides
 from settler.derived import Quantity, plausibility_warnings, settling_velocity
 from settler.physics import (COALESCENCE_RULES, PROBABILITY_FORMS, STANDARD_GRAVITY, density_at_age, droplet_rate,
-                             relative_diameter_at_age, scale_factor_pdf)
+                             relative_diameter_at_age, scale_factor_pdf, stokes_velocity)
 
 from . import closures, limits
 from .grid import SectionGrid, make_grid, split_to_pivots, volume_of
@@ -307,7 +307,7 @@ def build(case: Case) -> Model:
                  velocity_table=table, age_step=tau / TABLE_PER_TAU, residence_time=residence, stop_time=stop_time,
                  horizontal=horizontal, reacting=reacting, x_initial=x0, x_final=xf, time_constant=tau,
                  viscosity=case.slag_viscosity, cloud_coefficient=cloud_coefficient, cloud_radius=cloud_radius,
-                 parameters=parameters, return_velocity=return_velocity, roof_thickness=roof_thickness(case),
+                 parameters=parameters, return_velocity=return_velocity, roof_thickness=float(roof_radius[-1]),
                  roof_coefficient=roof_coefficient, roof_radius=roof_radius, bottom_thickness=bottom_thickness,
                  roof_slag_velocity=roof_slag_velocity(case, roof_volume > 0.0, horizontal),
                  return_upflow=return_upflow, exchange_rate=exchange_rate, turning_weight=turning_weight)
@@ -454,10 +454,9 @@ def roof_thickness(case: Case) -> float:
     if drainage:
         drho = case.matte.density - case.slag.density
         mu = case.slag_viscosity
-        d = case.feed.mean_diameter
         inlet = math.pi * (0.5 * g.inlet_diameter) ** 2
         flux = case.feed.mass_rate / case.matte.density / inlet
-        stokes = drho * STANDARD_GRAVITY * d * d / (18.0 * mu)
+        stokes = stokes_velocity(case.feed.mean_diameter, case.matte.density, case.slag.density, mu)
         slag = roof_slag_velocity(case, True, case.popbal.slag_flow == "horizontal")
         try:
             thickness = closures.roof_drainage_thickness(flux, stokes, p.roof_drainage_ratio, drho, mu,
