@@ -138,6 +138,17 @@ the reported axis velocity ran at the unconfined sqrt(c_ch Q drho g / (pi mu)) w
 took c(R/R_c) (1.55 u_s at R/R_c = 2.6); the cloud law now has c_ch c(R/R_c) t^2 and carries the confined u_s
 (tests/test_popbal_channel_closure.py), and the measurement is to be made again.
 
+The plume's slag core apart from the droplets' channel (``plume_core_radius`` R_s, with confinement; 2026-12-07).
+In the deep family's Stokes plumes the droplets fall packed in a thread (median gap to the nearest neighbour 0.3-0.5
+diameters, volume fraction 0.03-0.06 at 0.1-0.3 of the height) inside a slag core of R* = 10.6-19.1 mm: one channel
+radius at 5 mm gives their counts (-3 / +8 / +16 % in the 50 / 150 / 20 mm columns) with the plume 26-159 % too
+fast, one at 10.5 mm their axis with the counts two to three times too high (docs/guide/reduced-model.md). With
+R_s the confined law's coefficient c(R / R_s) and the return share S(R / R_s) are the slag core's, and R_c (the
+channel's load, collisions and shear) is capped at R_s: u_s = sqrt(c_ch c(R / R_s) Q drho g / (pi mu)) whatever
+R_c, and the cloud law c_ch c(R / R_s) phi drho g R_c^2 / mu still carries u_s (its load is the same line force
+spread over pi R_c^2). An exploratory form, measured with each run's own R*_t as R_s (an oracle) and not yet
+given a law; no stored layer sets it.
+
 Roof layer (``roof_layer_coefficient`` c_L, ``roof_thickness`` delta; zone "roof"). In the full runs about half of
 the demo family's droplets sit in the top 10 mm, under the inlet (data/reference/<run>/zones.csv: the roof layer's
 volume fraction 0.019, 0.029 and 0.044 at 0.5, 1 and 2 times the demo's feed, 0.021 and 0.040 at half and twice the
@@ -527,10 +538,15 @@ def confined_return_share(column_to_core):
 
 
 def confined_closure(volume_flux, excess_density, viscosity, multiplier, column_radius, radius_of, iterations=200,
-                     tolerance=1e-12, gravity=STANDARD_GRAVITY, law=confined_plume_coefficient):
+                     tolerance=1e-12, gravity=STANDARD_GRAVITY, law=confined_plume_coefficient, core_radius=None):
     """(u_s [m/s], R_c [m]) with u_s = sqrt(multiplier c(R/R_c) Q drho g / (pi mu)) and R_c = radius_of(u_s), R the
     column radius [m], c = ``law`` (:data:`PLUME_LAWS`), by fixed-point iteration from c = 1; ValueError if the
-    channel reaches the column wall (R_c >= R) or the iteration does not settle."""
+    channel reaches the column wall (R_c >= R) or the iteration does not settle. ``core_radius`` R_s [m]: the
+    coefficient is c(R/R_s), the slag core's, whatever the droplets' R_c (then no iteration is needed)."""
+    if core_radius is not None:
+        velocity = steady_channel_velocity(volume_flux, excess_density, viscosity,
+                                           multiplier * law(column_radius / core_radius), gravity)
+        return velocity, radius_of(velocity)
     coefficient = 1.0
     for _ in range(iterations):
         velocity = steady_channel_velocity(volume_flux, excess_density, viscosity, multiplier * coefficient, gravity)

@@ -185,7 +185,8 @@ def build(case: Case) -> Model:
     z = (np.arange(cells) + 0.5) * dz
     # the droplets' cloud law in the plume carries them at transport x u_s (steady), so its coefficient is c_ch x t^2,
     # times the confined plume's c(R / R_c) under popbal.confinement, which u_s holds (channel_closure)
-    confined = closures.PLUME_LAWS[p.plume_law or "uniform_core"](column_radius(case) / channel_radius) \
+    law = closures.PLUME_LAWS[p.plume_law or "uniform_core"]  # of the slag core R_s (R_c unless plume_core_radius)
+    confined = law(column_radius(case) / core_radius(case, channel_radius)) \
         if p.confinement and plume_velocity > 0.0 and channel_radius > 0.0 else 1.0
     plume_coefficient = p.channel_coefficient * confined * transport**2
     cloud_coefficient, cloud_radius = closures.cloud_profile(z, g.height, channel_radius, plume_coefficient,
@@ -293,7 +294,7 @@ def build(case: Case) -> Model:
         raise CaseError(f"popbal.return_flow_ratio = {ratio!r}: needs a channel zone inside the box "
                         "(popbal.channel_radius_factor > 0); allowed: 0 without one")
     if p.confinement and ratio > 0.0:  # r multiplies the confined Stokes plume's return share S(R / R_c)
-        ratio *= closures.confined_return_share(column_radius(case) / channel_radius)
+        ratio *= closures.confined_return_share(column_radius(case) / core_radius(case, channel_radius))
     return_velocity = closures.return_velocity(ratio, plume_velocity)
     parameters["bottom_lift"], parameters["bottom_lift_velocity"] = bottom_lift(case, bottom_thickness,
                                                                                 return_velocity)
@@ -471,6 +472,12 @@ def roof_thickness(case: Case) -> float:
     return thickness
 
 
+def core_radius(case: Case, channel_radius: float) -> float:
+    """The plume's slag core radius R_s [m] of the confined plume's laws: popbal.plume_core_radius, else the channel
+    radius R_c."""
+    return case.popbal.plume_core_radius or channel_radius
+
+
 def column_radius(case: Case) -> float:
     """R = sqrt(W D / pi) [m]: the radius of the column with the box's cross-section (the confined plume's wall)."""
     return math.sqrt(case.geometry.width * case.geometry.depth / math.pi)
@@ -496,7 +503,19 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
                         f"{p.channel_radius_form or 'inlet'!r}: allowed: both together (a fixed channel radius), or "
                         "neither")
 
-    def radius_of(velocity):
+    core = p.plume_core_radius
+    if core is not None and not p.confinement:
+        raise CaseError(f"popbal.plume_core_radius = {core!r} m: the slag core of the confined plume's laws; allowed "
+                        "only with popbal.confinement = true (or leave it out)")
+    if core is not None and core >= column_radius(case):
+        raise CaseError(f"popbal.plume_core_radius = {core!r} m: allowed below the column's equivalent radius "
+                        f"{column_radius(case):.4g} m, where the confined plume has a return flow")
+
+    def radius_of(velocity):  # the droplets' channel, inside the slag core where one is given
+        radius = droplet_radius_of(velocity)
+        return radius if core is None else min(radius, core)
+
+    def droplet_radius_of(velocity):
         if p.channel_radius_form == "fixed":
             return p.channel_radius if p.channel_radius_factor > 0.0 else 0.0
         if p.channel_radius_form == "flux" and p.plume_dilution_reynolds:  # no wider than the inlet that feeds it
@@ -511,7 +530,8 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
         try:
             velocity, radius = closures.confined_closure(volume_flux, excess, case.slag_viscosity,
                                                          p.channel_coefficient, column_radius(case), radius_of,
-                                                         law=closures.PLUME_LAWS[p.plume_law or "uniform_core"])
+                                                         law=closures.PLUME_LAWS[p.plume_law or "uniform_core"],
+                                                         core_radius=core)
         except ValueError as exc:
             raise CaseError(f"popbal.confinement = true: {exc}; allowed: a channel narrower than the box (a smaller "
                             "popbal.channel_radius_factor), or confinement = false") from None

@@ -282,6 +282,13 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                              "volume fraction; none of it turns into the return flow "
                                              "(popbal.closures); absent: no bottom layer.", 0.0,
                                      exclusive_minimum=True, optional=True),
+        "plume_core_radius": Field(F, "m", "R_s, the radius of the plume's slag core, with confinement: the "
+                                           "confined plume's coefficient c(R / R_s) and return share S(R / R_s) take "
+                                           "it in place of the channel radius R_c, which stays the radius of the "
+                                           "droplets' channel (their collisions and load) and is no wider than R_s: "
+                                           "in the Stokes plumes of the reference runs the droplets fall in a thread "
+                                           "narrower than the slag they drive (popbal.closures); absent: R_s = R_c.",
+                                   0.0, exclusive_minimum=True, optional=True),
         "roof_collision_efficiency": Field(F, "-", "Collision efficiency of the roof layer: its merges over the "
                                                    "collisions of its droplets well mixed over the layer, i.e. the "
                                                    "engine's local efficiency times how the droplets cluster inside "

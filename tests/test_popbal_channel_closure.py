@@ -143,3 +143,42 @@ def test_the_fixed_radius_and_its_form_go_together(extra):
 
     with pytest.raises(CaseError, match="popbal.channel_radius = .*allowed: both together"):
         channel_closure(load_case("demo", {"case.calibration": "none", **extra}))
+
+
+def test_the_slag_core_radius_sets_the_plume_law_and_bounds_the_droplets_channel():
+    """popbal.plume_core_radius R_s: the confined line-force law takes A0(R / R_s) whatever the droplets' channel
+    radius R_c (u_s^2 = c_ch A0(R / R_s) Q drho g / (4 pi mu) by hand, the same at R_c = 3 and 6 mm), the return
+    flow the slag core's share S(R / R_s), and a flux-form channel wider than R_s is held at R_s. Without R_s the
+    law takes R_c, as before (the test above)."""
+    from popbal.model import column_radius
+
+    core = 0.012
+    overrides = {"case.calibration": "none", "popbal.channel_radius_form": "fixed", "popbal.channel_radius": 0.003,
+                 "popbal.channel_radius_factor": 1.0, "popbal.confinement": True, "popbal.plume_law": "line_force",
+                 "popbal.channel_coefficient": 1.0, "popbal.channel_feed_fraction": 1.0,
+                 "popbal.plume_core_radius": core, "popbal.return_flow_ratio": 1.0}
+    case = load_case("demo", overrides)
+    radius, velocity, _, _ = channel_closure(case)
+    q = case.feed.mass_rate / case.matte.density
+    a0 = closures.confined_axis_coefficient(column_radius(case) / core)
+    by_hand = math.sqrt(a0 * q * (case.matte.density - case.slag.density) * STANDARD_GRAVITY
+                        / (4 * math.pi * case.slag_viscosity))
+    assert radius == 0.003 and velocity == pytest.approx(by_hand, rel=1e-9)
+    wider = load_case("demo", {**overrides, "popbal.channel_radius": 0.006})
+    assert channel_closure(wider)[:2] == (0.006, pytest.approx(velocity, rel=1e-12))
+    model = popbal.setup(case)
+    share = closures.confined_return_share(column_radius(case) / core)
+    assert model.return_velocity == pytest.approx(closures.return_velocity(share, velocity), rel=1e-9)
+    flux = load_case("demo", {**overrides, "popbal.channel_radius_form": "flux", "popbal.channel_radius": None,
+                              "popbal.channel_radius_factor": 50.0})
+    assert channel_closure(flux)[0] == core
+
+
+@pytest.mark.parametrize("extra, message", [({"popbal.confinement": False}, "allowed only with popbal.confinement"),
+                                            ({"popbal.plume_core_radius": 0.06}, "below the column's equivalent")])
+def test_the_slag_core_radius_is_refused_where_it_means_nothing(extra, message):
+    from settler.errors import CaseError
+
+    overrides = {"case.calibration": "none", "popbal.confinement": True, "popbal.plume_core_radius": 0.012, **extra}
+    with pytest.raises(CaseError, match=f"popbal.plume_core_radius = .*{message}"):
+        channel_closure(load_case("demo", overrides))
