@@ -91,7 +91,7 @@ SINGULAR_RATIO_LIMIT = 1e-3
 #: The closure sets of ``--closures`` (analysis.calibration.hierarchy.CLOSURES, not imported here so that the command
 #: line starts without the calibration package; a test holds the two equal).
 CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy", "zones", "zones_dilution", "zones_floor", "zones_line",
-                 "zones_drain")
+                 "zones_drain", "zones_core")
 
 
 class CalibrationError(ValueError):
@@ -600,8 +600,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "layers, not fitted to the coalescence-off runs, whose floors fill) or 'zones_line' "
                              "('zones_floor' with popbal.plume_law = 'line_force', its transport level scored on "
                              "the mean diameter and axis velocity alone) or 'zones_drain' ('zones_line' with the "
-                             "roof's thickness from its drainage law, popbal.roof_thickness_form = 'drainage'); "
-                             "analysis.calibration.hierarchy.CLOSURES; default designed")
+                             "roof's thickness from its drainage law, popbal.roof_thickness_form = 'drainage') or "
+                             "'zones_core' ('zones_drain' with the plume's slag core apart from the droplets' "
+                             "channel, popbal.plume_core_radius, fitted with the channel and the shear coefficient "
+                             "at the whole level alone); analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
                              "no bands, the errors only)")

@@ -314,6 +314,12 @@ def steady_channel_fraction(volume_flux, radius, velocity):
     return volume_flux / (math.pi * radius * radius * velocity) if velocity > 0.0 else 0.0
 
 
+def feed_reynolds(volume_flux, radius, density_slag, viscosity):
+    """The feed's Reynolds number rho_s Q / (mu R) [-] through a core of radius R [m] (the regime's group,
+    ``spread_flux_reynolds``)."""
+    return density_slag * volume_flux / (viscosity * radius)
+
+
 def plume_reynolds(velocity, radius, density_slag, viscosity):
     """Plume Reynolds number rho_s u_c R_c / mu [-] (on the radius)."""
     return density_slag * velocity * radius / viscosity

@@ -472,10 +472,37 @@ def roof_thickness(case: Case) -> float:
     return thickness
 
 
-def core_radius(case: Case, channel_radius: float) -> float:
-    """The plume's slag core radius R_s [m] of the confined plume's laws: popbal.plume_core_radius, else the channel
-    radius R_c."""
-    return case.popbal.plume_core_radius or channel_radius
+def core_radius(case: Case, channel_radius: float | None = None) -> float | None:
+    """The plume's slag core radius R_s [m] of the confined plume's laws (popbal.closures): popbal.plume_core_radius
+    R_0, or spread_core_share x the column radius R where the feed Reynolds number rho_s Q_ch / (mu R_0) reaches
+    spread_flux_reynolds, and no more than plume_core_column_share x R; without plume_core_radius the channel radius
+    R_c (None when not given). CaseError where the keys do not go together."""
+    p = case.popbal
+    spread = (p.spread_flux_reynolds, p.spread_core_share)
+    for key, value in (("plume_core_column_share", p.plume_core_column_share),
+                       ("spread_flux_reynolds", p.spread_flux_reynolds), ("spread_core_share", p.spread_core_share)):
+        if value is not None and p.plume_core_radius is None:
+            raise CaseError(f"popbal.{key} = {value!r}: bounds or replaces the slag core popbal.plume_core_radius; "
+                            "allowed only with it (or leave it out)")
+    if (spread[0] is None) != (spread[1] is None):
+        raise CaseError(f"popbal.spread_flux_reynolds = {spread[0]!r} with popbal.spread_core_share = {spread[1]!r}: "
+                        "allowed: both (a spread plume's core over the column) or neither")
+    if p.plume_core_radius is None:
+        return channel_radius
+    column = column_radius(case)
+    core = p.plume_core_radius
+    if p.spread_flux_reynolds is not None:
+        flux = case.feed.mass_rate * p.channel_feed_fraction / case.matte.density
+        if closures.feed_reynolds(flux, core, case.slag.density, case.slag_viscosity) >= p.spread_flux_reynolds:
+            core = p.spread_core_share * column
+    if p.plume_core_column_share is not None:
+        core = min(core, p.plume_core_column_share * column)
+    if core >= column:
+        raise CaseError(f"popbal.plume_core_radius = {p.plume_core_radius!r} m: the slag core ({core:.4g} m) must be "
+                        f"narrower than the column's equivalent radius {column:.4g} m, where the confined plume has a "
+                        "return flow; allowed: a smaller plume_core_radius, plume_core_column_share or "
+                        "spread_core_share")
+    return core
 
 
 def column_radius(case: Case) -> float:
@@ -503,13 +530,10 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
                         f"{p.channel_radius_form or 'inlet'!r}: allowed: both together (a fixed channel radius), or "
                         "neither")
 
-    core = p.plume_core_radius
-    if core is not None and not p.confinement:
-        raise CaseError(f"popbal.plume_core_radius = {core!r} m: the slag core of the confined plume's laws; allowed "
-                        "only with popbal.confinement = true (or leave it out)")
-    if core is not None and core >= column_radius(case):
-        raise CaseError(f"popbal.plume_core_radius = {core!r} m: allowed below the column's equivalent radius "
-                        f"{column_radius(case):.4g} m, where the confined plume has a return flow")
+    if p.plume_core_radius is not None and not p.confinement:
+        raise CaseError(f"popbal.plume_core_radius = {p.plume_core_radius!r} m: the slag core of the confined plume's "
+                        "laws; allowed only with popbal.confinement = true (or leave it out)")
+    core = core_radius(case)
 
     def radius_of(velocity):  # the droplets' channel, inside the slag core where one is given
         radius = droplet_radius_of(velocity)

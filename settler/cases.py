@@ -289,6 +289,19 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                            "in the Stokes plumes of the reference runs the droplets fall in a thread "
                                            "narrower than the slag they drive (popbal.closures); absent: R_s = R_c.",
                                    0.0, exclusive_minimum=True, optional=True),
+        "plume_core_column_share": Field(F, "-", "beta: with plume_core_radius, the slag core is no wider than beta "
+                                                 "times the column's equivalent radius R = sqrt(W D / pi), where a "
+                                                 "narrow column leaves the return flow too little room "
+                                                 "(popbal.closures); absent: no such bound.", 0.0,
+                                         exclusive_minimum=True, optional=True),
+        "spread_flux_reynolds": Field(F, "-", "Re_Q,c: with plume_core_radius, a plume whose feed Reynolds number "
+                                              "rho_s Q / (mu R_s) reaches it spreads, its slag core then "
+                                              "spread_core_share times the column's equivalent radius "
+                                              "(popbal.closures); absent: every plume is compact.", 0.0,
+                                      exclusive_minimum=True, optional=True),
+        "spread_core_share": Field(F, "-", "s: the spread plume's slag core over the column's equivalent radius "
+                                           "(needed with spread_flux_reynolds).", 0.0, exclusive_minimum=True,
+                                   optional=True),
         "roof_collision_efficiency": Field(F, "-", "Collision efficiency of the roof layer: its merges over the "
                                                    "collisions of its droplets well mixed over the layer, i.e. the "
                                                    "engine's local efficiency times how the droplets cluster inside "

@@ -489,7 +489,8 @@ def test_cell_efficiency_is_the_kernel_runs_merges_over_its_cell_by_cell_collisi
     assert got["standard_error"] == pytest.approx(0.8 * math.sqrt(1.0 / 100.0 + 0.05**2), rel=1e-12)
     assert got["merges"] == 100 and got["expected_collisions"] == 125.0 and got["form"] == "cell"
     assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution", "zones_floor",
-                                                                                    "zones_line", "zones_drain"]
+                                                                                    "zones_line", "zones_drain",
+                                                                                    "zones_core"]
 
 
 def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
@@ -799,3 +800,84 @@ def test_a_layer_names_the_reference_set_engine_it_was_fitted_to():
     assert set(engine) == {"fulldem", "popbal", "settler"}
     assert all(re.fullmatch(r"[0-9a-f]{40}", tree) for tree in engine.values())
     assert fitted_set_engine("0" * 40, root) is None
+
+
+def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_level_alone(tmp_path, monkeypatch):
+    """'zones_core': no transport level (the plume laws as derived: channel_coefficient and return_flow_ratio 1);
+    the whole level fits the shear coefficient, the compact slag core R_0 and the channel's radius factor, none of
+    which the fixed values may override; the floor's f_b is measured at the fit's start radii; the spread core's
+    share is measured (stubbed here) with R_0 at its start; the layer is valid TOML that writes the 'inlet' form,
+    the fitted radius factor and the measured share once each."""
+    import tomllib
+
+    import analysis.calibration.hierarchy as h
+    from analysis.calibration.fit import LevelFit
+    from analysis.calibration.layer import write_layer
+    from analysis.calibration.registry import Registry
+    from tests.test_floor_layer import REMADE as reference
+    from tests.test_floor_layer import _stored_layer
+
+    for run, source, thickness in (("a", "demo_cell_25", 4e-3), ("b", "demo_feed_half_fine", 3e-3),
+                                   ("off", "demo_no_coalescence_fine", 1e-3), ("kernel", "demo_cell_25", 1e-3)):
+        _stored_layer(tmp_path / run, thickness, reference / source / "case.toml")
+        (tmp_path / run / "timeseries.csv").write_text("time\n0\n")
+    registry = Registry(holdouts=(), why={}, families={}, path=tmp_path / "holdouts.toml",
+                        levels={"collision": ("kernel",), "transport": ("off",), "whole": ("a", "b")})
+    fixed_at, spread_at = {}, {}
+
+    def fit_level(level, targets, case_files, parameters, start, fixed, **kw):
+        fixed_at[level] = dict(fixed)
+        names = list(parameters)
+        assert start == {n: h.START[n] for n in names}
+        return LevelFit(level=level, runs=list(case_files), parameters=names,
+                        estimates={"shear_coefficient": 2.0, "plume_core_radius": 0.01, "channel_radius_factor": 0.45},
+                        standard_errors={n: 0.001 for n in names}, correlation=np.eye(len(names)), discrepancy=0.0,
+                        chi2=1.0, residual_count=8, evaluations=3, status="converged", errors={},
+                        gate={"passed": True, "reasons": []})
+
+    def spread(runs, d, fixed):
+        spread_at.update(fixed)
+        return {"value": 0.42, "standard_error": 0.01, "per_run": {"b": 0.42}, "runs": ["b"]}
+
+    monkeypatch.setattr(h, "cell_efficiency", lambda folder: {"efficiency": 0.8, "standard_error": 0.06, "merges": 9,
+                                                              "quadrature_error": 0.0, "expected_collisions": 11.0,
+                                                              "form": "cell"})
+    monkeypatch.setattr(h, "seed_scatter", lambda reference_dir: {})
+    monkeypatch.setattr(h, "radius_factor_from_zones", lambda runs, d: {"value": 4.9, "core_fraction": 0.04,
+                                                                        "runs": list(runs)})
+    monkeypatch.setattr(h, "roof_from_zones", lambda runs, d: {"coefficient": 0.05, "thickness": 0.006,
+                                                               "per_run": {}, "runs": list(runs),
+                                                               "drainage_ratio": 2.5,
+                                                               "drainage_per_run": {r: 2.5 for r in runs}})
+    monkeypatch.setattr(h, "roof_kernel_from_collisions", lambda runs, d, thickness: {
+        "efficiency": 1.9, "shear_coefficient": 3.0, "per_run": {}, "runs": list(runs)})
+    monkeypatch.setattr(h, "spread_share_from_groups", spread)
+    monkeypatch.setattr(h, "load_target", lambda run, d, seed: run)
+    monkeypatch.setattr(h, "fit_level", fit_level)
+    result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures="zones_core")
+    assert list(fixed_at) == ["whole"]
+    assert [f.parameters for f in result.levels] == [["shear_coefficient", "plume_core_radius",
+                                                      "channel_radius_factor"]]
+    whole = fixed_at["whole"]
+    assert not {"popbal.channel_radius_factor", "popbal.plume_core_radius", "popbal.shear_coefficient"} & set(whole)
+    assert whole["popbal.channel_radius_form"] == "inlet" and whole["popbal.channel_coefficient"] == 1.0
+    assert whole["popbal.spread_core_share"] == 0.42 and spread_at["popbal.plume_core_radius"] == 0.0095
+    assert result.floor["runs"] == ["a", "b"]
+    layer = tomllib.loads(write_layer(result, tmp_path / "core.toml", tmp_path / "holdouts.toml", "x").read_text())
+    popbal = layer["popbal"]
+    assert popbal["channel_radius_form"] == "inlet" and popbal["channel_radius_factor"] == 0.45
+    assert popbal["plume_core_radius"] == 0.01 and popbal["spread_core_share"] == 0.42
+    assert popbal["plume_core_column_share"] == 0.62 and popbal["spread_flux_reynolds"] == 0.66
+
+
+def test_the_spread_core_share_is_measured_in_the_runs_the_regime_rule_spreads():
+    """spread_share_from_groups on stored runs: at R_0 = 9.5 mm and Re_Q,c = 0.66, simple (rho_s Q / (mu R_0) =
+    1.24) is spread and demo_cell_25 (0.31) is not; simple's share is its R* over its column radius, 47.4 mm / 112.8
+    mm = 0.420 in data/reference/README.md's measured table; with no spread run it refuses."""
+    from analysis.calibration.zones import spread_share_from_groups
+
+    fixed = {"popbal.plume_core_radius": 0.0095, "popbal.spread_flux_reynolds": 0.66}
+    got = spread_share_from_groups(["demo_cell_25", "simple"], "data/reference", fixed)
+    assert got["runs"] == ["simple"] and got["value"] == pytest.approx(47.4 / 112.8, rel=5e-3)
+    with pytest.raises(ValueError, match="no run of demo_cell_25 is spread"):
+        spread_share_from_groups(["demo_cell_25"], "data/reference", fixed)

@@ -175,10 +175,39 @@ def test_the_slag_core_radius_sets_the_plume_law_and_bounds_the_droplets_channel
 
 
 @pytest.mark.parametrize("extra, message", [({"popbal.confinement": False}, "allowed only with popbal.confinement"),
-                                            ({"popbal.plume_core_radius": 0.06}, "below the column's equivalent")])
+                                            ({"popbal.plume_core_radius": 0.06}, "narrower than the column's"),
+                                            ({"popbal.spread_flux_reynolds": 0.5}, "allowed: both"),
+                                            ({"popbal.plume_core_radius": None, "popbal.spread_core_share": 0.4},
+                                             None)])
 def test_the_slag_core_radius_is_refused_where_it_means_nothing(extra, message):
     from settler.errors import CaseError
 
     overrides = {"case.calibration": "none", "popbal.confinement": True, "popbal.plume_core_radius": 0.012, **extra}
-    with pytest.raises(CaseError, match=f"popbal.plume_core_radius = .*{message}"):
-        channel_closure(load_case("demo", overrides))
+    match = f"popbal.plume_core_radius = .*{message}" if message and "both" not in message else \
+        ("popbal.spread_flux_reynolds = 0.5 with popbal.spread_core_share = None: allowed: both" if message else
+         "popbal.spread_core_share = 0.4: bounds or replaces the slag core popbal.plume_core_radius; allowed only")
+    with pytest.raises(CaseError, match=match):
+        channel_closure(load_case("demo", {k: v for k, v in overrides.items() if v is not None}))
+
+
+def test_the_slag_core_spreads_over_the_column_at_the_feed_reynolds_number_and_is_bounded_in_narrow_columns():
+    """R_s is plume_core_radius R_0 while rho_s Q / (mu R_0) stays below spread_flux_reynolds, and
+    spread_core_share x the column radius R at and above it (the demo at 0.31 against 1.24 at four times its feed,
+    with R_0 = 9.5 mm); plume_core_column_share beta caps it at beta R (deep's feed in its 20 mm column)."""
+    from popbal.model import column_radius, core_radius
+
+    base = {"case.calibration": "none", "popbal.confinement": True, "popbal.plume_core_radius": 0.0095,
+            "popbal.spread_flux_reynolds": 0.66, "popbal.spread_core_share": 0.4, "popbal.channel_feed_fraction": 1.0}
+    demo = load_case("demo", base)
+    q = demo.feed.mass_rate / demo.matte.density
+    assert closures.feed_reynolds(q, 0.0095, demo.slag.density, demo.slag_viscosity) == pytest.approx(
+        3150.0 * q / (0.45 * 0.0095), rel=1e-12) and 3150.0 * q / (0.45 * 0.0095) < 0.66
+    assert core_radius(demo) == 0.0095
+    fast = load_case("demo", {**base, "feed.mass_rate": 4 * demo.feed.mass_rate})
+    assert core_radius(fast) == pytest.approx(0.4 * column_radius(fast), rel=1e-12)
+    assert channel_closure(fast)[0] <= core_radius(fast)
+    narrow = load_case("deep", {**base, "geometry.width": 0.02, "geometry.depth": 0.02,
+                                "popbal.plume_core_column_share": 0.62})
+    assert core_radius(narrow) == pytest.approx(0.62 * math.sqrt(0.02 * 0.02 / math.pi), rel=1e-12)
+    wide = load_case("deep", {**base, "popbal.plume_core_column_share": 0.62})
+    assert core_radius(wide) == 0.0095

@@ -34,7 +34,7 @@ from .fit import LevelFit, fit_level
 from .registry import Registry, refuse_holdouts
 from .targets import TARGET_COLUMNS, load_target, seed_scatter
 from .zones import (ROOF_RESOLVED_CELL, dilution_from_zones, law_roof_thickness, radius_factor_from_zones,
-                    roof_from_zones, roof_kernel_from_collisions)
+                    roof_from_zones, roof_kernel_from_collisions, spread_share_from_groups)
 
 #: What each fitted level fits ([popbal] keys) and from where it starts.
 LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "return_flow_ratio"),
@@ -55,6 +55,14 @@ LAYER_LEVELS = {"transport": ("channel_coefficient", "bottom_layer_factor"), "wh
 BUSY = {"popbal.busy_partners": True}
 CONFINED = {"popbal.confinement": True}
 LINE_FORCE = {"popbal.confinement": True, "popbal.plume_law": "line_force"}
+#: 'zones_core' (added 2026-12-07, before any fit to the whole remade set): the plume's slag core apart from the
+#: droplets' channel (popbal.plume_core_radius; docs/guide/reduced-model.md, "two radii"), the laws as derived
+#: (channel_coefficient and return_flow_ratio 1), the return flow's circulation and the turn above the bottom layer
+#: as measured on the continued demo_cell_25 and probed on the demo's families.
+CORE = {"popbal.confinement": True, "popbal.plume_law": "line_force", "popbal.channel_coefficient": 1.0,
+        "popbal.return_flow_ratio": 1.0, "popbal.entrainment_length": 1.12, "popbal.turning_length": 0.54,
+        "popbal.bottom_turning_share": 0.06, "popbal.plume_core_column_share": 0.62,
+        "popbal.spread_flux_reynolds": 0.66}
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers": {"levels": LAYER_LEVELS, "layers": True},
             "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": BUSY},
@@ -72,7 +80,11 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "zones_drain": {"levels": {"transport": ("channel_coefficient",), "whole": ("shear_coefficient",)},
                             "layers": True, "switches": LINE_FORCE, "roof_kernel": True, "dilution": True,
                             "cell_efficiency": True, "floor": True, "drainage": True,
-                            "columns": {"transport": ("mean_diameter", "channel_velocity")}}}
+                            "columns": {"transport": ("mean_diameter", "channel_velocity")}},
+            "zones_core": {"levels": {"whole": ("shear_coefficient", "plume_core_radius", "channel_radius_factor")},
+                           "layers": True, "switches": CORE, "form": {"popbal.channel_radius_form": "inlet"},
+                           "roof_kernel": True, "cell_efficiency": True, "floor": True, "drainage": True,
+                           "spread": True}}
 #: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
 #: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
 #: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
@@ -95,12 +107,30 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
 #: measured at each whole run's own law thickness, where 'zones_line' gives every run the transport runs' mean
 #: thickness: the resolved runs' roofs thin from 5 to 2.5 mm as the feed flux over U_s grows fourfold, and one
 #: thickness put that into the roof's efficiency (docs/guide/reduced-model.md).
+#: 'zones_core' fits, at the whole level alone, the compact plume's slag core R_0 (plume_core_radius), the droplets'
+#: channel in inlet radii (channel_radius_factor, the channel no wider than the core) and the shear coefficient; the
+#: coalescence-off runs give the roof's drainage law (no level of their own: the plume laws are taken as derived,
+#: where demo_no_coalescence_fine's plume spreads without coalescence and deep_w005_no_coalescence's does not, which
+#: no closure yet tells apart). The spread plume's core over the column (spread_core_share) is measured in the whole
+#: runs the regime rule calls spread (:func:`analysis.calibration.zones.spread_share_from_groups`).
 #: What each switch of a closure set stands for (the layer's comment on it).
 SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time merging, not fitted",
                 "popbal.confinement": "the confined plume's coefficient and return flow (popbal.closures), not fitted",
-                "popbal.plume_law": "the plume as the line force of the channel's load (popbal.closures), not fitted"}
+                "popbal.plume_law": "the plume as the line force of the channel's load (popbal.closures), not fitted",
+                "popbal.channel_coefficient": "the line-force law as derived (1), not fitted",
+                "popbal.return_flow_ratio": "the confined Stokes plume's return share as derived (1), not fitted",
+                "popbal.entrainment_length": "the circulation's entrainment length measured on the slag of the "
+                                             "continued demo_cell_25 (docs/guide/reduced-model.md)",
+                "popbal.turning_length": "the circulation's turning length measured there",
+                "popbal.bottom_turning_share": "the turn above the bottom layer that brings the demo's resolved "
+                                               "families within 7 % in count at one value (probe, training runs)",
+                "popbal.plume_core_column_share": "the slag core's bound in a narrow column: deep's feed in its "
+                                                  "20 mm column holds its axis at 0.62 (probe, training runs)",
+                "popbal.spread_flux_reynolds": "the regime boundary: compact at rho_s Q / (mu R_0) = 0.62 "
+                                               "(demo_feed_double_fine, demo_visc_half_fine), spread at 0.70 "
+                                               "(demo_wide_33) and above, R_0 = 9.5 mm; the midpoint"}
 START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
-         "bottom_layer_factor": 1.0}
+         "bottom_layer_factor": 1.0, "plume_core_radius": 0.0095, "channel_radius_factor": 0.5}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
 FORM = {"popbal.channel_radius_form": "flux"}
 #: Key of :attr:`Hierarchy.missing` for the registered hold-outs not stored (not a level: they do not stop the others
@@ -128,6 +158,7 @@ class Hierarchy:
     closures: str = "designed"  # the CLOSURES entry fitted
     roof: dict | None = None  # the roof law from the zone diagnostics (roof_from_zones), with 'layers'
     floor: dict | None = None  # f_b from the floor layers (floor_layer.bottom_factor), with 'zones_floor'
+    spread: dict | None = None  # the spread plume's core share (zones.spread_share_from_groups), with 'zones_core'
 
     def summary(self) -> str:
         c = self.collision
@@ -263,8 +294,10 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
         k_r = dilution_from_zones(zone_runs, reference_dir)
     else:
         k_r = radius_factor_from_zones(transport_runs, reference_dir)
-    fixed = {**FORM, **CLOSURES[closures].get("switches", {}), "popbal.channel_radius_factor": k_r["value"],
-             "popbal.collision_efficiency": collision["efficiency"]}
+    fixed = {**CLOSURES[closures].get("form", FORM), **CLOSURES[closures].get("switches", {}),
+             "popbal.channel_radius_factor": k_r["value"], "popbal.collision_efficiency": collision["efficiency"]}
+    if "channel_radius_factor" in CLOSURES[closures]["levels"].get("whole", ()):
+        del fixed["popbal.channel_radius_factor"]  # fitted: a fixed value would override the fit's
     if "reynolds" in k_r:
         fixed["popbal.plume_dilution_reynolds"] = k_r["reynolds"]
     roof = None
@@ -292,8 +325,15 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
         roof["kernel"] = roof_kernel_from_collisions(whole_runs, reference_dir, thickness=thickness)
         fixed.update({"popbal.roof_collision_efficiency": roof["kernel"]["efficiency"],
                       "popbal.roof_shear_coefficient": roof["kernel"]["shear_coefficient"]})
+    spread = None
+    if CLOSURES[closures].get("spread"):  # the spread whole runs' cores, at the fit's start R_0
+        whole_runs = _stored(registry.levels.get("whole", ()), reference_dir)[0]
+        refuse_holdouts(whole_runs, registry, "the spread plume's core")
+        spread = spread_share_from_groups(whole_runs, reference_dir, {**fixed, "popbal.plume_core_radius":
+                                                                      START["plume_core_radius"]})
+        fixed["popbal.spread_core_share"] = spread["value"]
     return {"fixed": fixed, "values": values, "collision": collision, "radius_factor": k_r, "roof": roof,
-            "transport_runs": transport_runs, "missing": missing}
+            "transport_runs": transport_runs, "missing": missing, "spread": spread}
 
 
 def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
@@ -311,7 +351,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     collision, k_r, roof, transport_runs = (measured[k] for k in ("collision", "radius_factor", "roof",
                                                                    "transport_runs"))
     levels, floor = [], None
-    for level in ("transport", "whole"):
+    for level in (lv for lv in ("transport", "whole") if lv in CLOSURES[closures]["levels"]):
         if level == "transport":
             runs = transport_runs
         else:
@@ -324,7 +364,10 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
             if not coalescing:
                 raise ValueError(f"closures {closures!r} measure the bottom layer in the whole level's coalescing runs; "
                                  f"none of {', '.join(runs) or 'no run'} has coalescence.enabled = true")
-            floor = bottom_factor(coalescing, reference_dir, fixed)
+            # at the fit's start where the level fits the radii f_b multiplies ('zones_core')
+            start = {f"popbal.{n}": START[n] for n in CLOSURES[closures]["levels"]["whole"]
+                     if n in ("plume_core_radius", "channel_radius_factor")}
+            floor = bottom_factor(coalescing, reference_dir, {**start, **fixed})
             fixed["popbal.bottom_layer_factor"] = floor["value"]
             values["bottom_layer_factor"] = (floor["value"], floor["standard_error"])  # measured: into the bands
         targets = [load_target(r, reference_dir, seed) for r in runs]
@@ -346,7 +389,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
                      missing={k: v for k, v in missing.items() if v}, coverage=coverage_result, closures=closures,
-                     roof=roof, floor=floor)
+                     roof=roof, floor=floor, spread=measured["spread"])
 
 
 def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, samples):

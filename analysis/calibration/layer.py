@@ -65,6 +65,8 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
              f"channel_radius_factor = {k_r['value']!r}  # - [derived] phi_p^(-1/2) of the plume core's volume "
              f"fraction {k_r['core_fraction']:.4g} in the zone diagnostics of {', '.join(k_r['runs'])}"
              + (" (the dilution law's Re -> 0 limit)" if "reynolds" in k_r else "")]
+    if any("channel_radius_factor" in fit.parameters for fit in result.levels):
+        lines.pop()  # fitted below
     if "reynolds" in k_r:
         lines.append(f"plume_dilution_reynolds = {k_r['reynolds']!r}  # - [derived] Re_d of phi_p = k_R^-2 / (1 + Re "
                      f"/ Re_d) over the same zone diagnostics, standard error "
@@ -100,7 +102,12 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
         for name in fit.parameters:
             lines.append(f"{name} = {fit.estimates[name]!r}  # - [derived] level {fit.level}: fit to "
                          f"{', '.join(fit.runs)}, standard error {fit.standard_errors[name]:.3g}")
-    for key, value in FORM.items():
+    if result.spread:
+        sp = result.spread
+        lines.append(f"spread_core_share = {sp['value']!r}  # - [derived] the geometric mean of R* / R over the "
+                     f"whole runs the regime rule spreads, {', '.join(sp['runs'])} (plume_force.csv), standard error "
+                     f"{sp['standard_error']:.3g}")
+    for key, value in CLOSURES[result.closures].get("form", FORM).items():
         lines.append(f"{key.split('.', 1)[1]} = {_q(value)}  # [chosen] the closure form of every level")
     for key, value in CLOSURES[result.closures].get("switches", {}).items():
         shown = _q(value) if isinstance(value, str) else str(value).lower()

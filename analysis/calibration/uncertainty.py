@@ -22,6 +22,7 @@ PARAMETERS: dict[str, tuple[float, float, str]] = {
     "roof_layer_coefficient": (1e-4, 10.0, "-"),
     "roof_thickness": (1e-3, 0.05, "m"),
     "bottom_layer_factor": (0.05, 20.0, "-"),
+    "plume_core_radius": (2e-3, 0.05, "m"),
 }
 
 

@@ -303,3 +303,30 @@ def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict
 
     return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
             "runs": list(runs)}
+
+
+def spread_share_from_groups(runs, reference_dir: str | Path, fixed: dict) -> dict:
+    """The spread plume's slag core over the column, s = R* / R [-] (R* the equivalent core at the axis speed,
+    :func:`analysis.groups.stored_measured_groups`; R the column's equivalent radius): the geometric mean over the
+    ``runs`` whose feed Reynolds number rho_s Q / (mu R_0) reaches popbal.spread_flux_reynolds under ``fixed``
+    ({dotted key: value}, with popbal.plume_core_radius R_0), with its standard error; ValueError where none does."""
+    from analysis.groups import stored_measured_groups
+    from popbal.closures import feed_reynolds
+    from popbal.model import column_radius
+    from settler.cases import load_case
+
+    shares = {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        case = load_case(folder / "case.toml", {k: v for k, v in fixed.items() if k.startswith("popbal.")})
+        flux = case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
+        if feed_reynolds(flux, fixed["popbal.plume_core_radius"], case.slag.density,
+                         case.slag_viscosity) >= fixed["popbal.spread_flux_reynolds"]:
+            shares[run] = stored_measured_groups(folder)["core_radius"] / column_radius(case)
+    if not shares:
+        raise ValueError(f"no run of {', '.join(runs) or 'none'} is spread by the regime rule: the spread core's "
+                         "share cannot be measured")
+    logs = np.log(list(shares.values()))
+    se = float(np.std(logs, ddof=1) / math.sqrt(len(logs))) if len(logs) > 1 else math.nan
+    value = float(np.exp(logs.mean()))
+    return {"value": value, "standard_error": value * se, "per_run": shares, "runs": list(shares)}
