@@ -607,6 +607,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
                              "no bands, the errors only)")
+    parser.add_argument("--workers", type=int, default=1, metavar="N",
+                        help="with --set: processes that run each evaluation's popbal runs side by side (default 1; "
+                             "the same numbers sooner, one per core)")
 
 
 def main(args) -> int:

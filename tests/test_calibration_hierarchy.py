@@ -94,6 +94,56 @@ def test_fit_recovers_a_linear_models_parameters_and_its_profile_matches_the_sta
     assert fit.gate["passed"], fit.gate
 
 
+def test_worker_processes_give_the_same_fit_as_one():
+    """fit_level with a pool of two spawned workers (analysis.calibration.fit.worker_pool) runs each evaluation's
+    targets side by side: the estimates, standard errors and evaluations are those of the serial fit, bit for bit
+    (the same model runs, only elsewhere); fewer than one worker is refused."""
+    from analysis.calibration.fit import worker_pool
+
+    truth = {"channel_coefficient": 0.4, "shear_coefficient": 1.5}
+    targets = _targets(_linear, truth, COVARIATES, np.random.default_rng(1))
+    start = {"channel_coefficient": 1.0, "shear_coefficient": 1.0}
+    serial = fit_level("whole", targets, {}, list(truth), start, model=_linear, progress=False, profile=False)
+    pool = worker_pool(2)
+    try:
+        pooled = fit_level("whole", targets, {}, list(truth), start, model=_linear, progress=False, profile=False,
+                           pool=pool)
+    finally:
+        pool.shutdown()
+    assert pooled.estimates == serial.estimates and pooled.standard_errors == serial.standard_errors
+    assert pooled.evaluations == serial.evaluations and pooled.errors == serial.errors
+    assert worker_pool(1) is None
+    with pytest.raises(ValueError, match="workers 0: allowed an integer >= 1"):
+        worker_pool(0)
+
+
+def _band_linear(name, values):
+    return _linear(Target(name, (0, 1), True, {}, {}), None, values, None)
+
+
+def test_a_band_from_worker_processes_is_the_serial_band():
+    """analysis.calibration.bands.band with a pool: the same draws, the same discrepancy factors in the same order,
+    so the same quantiles as the serial band."""
+    import functools
+
+    from analysis.calibration.bands import band
+    from analysis.calibration.fit import worker_pool
+
+    rng = np.random.default_rng(3)
+    draws = [{"channel_coefficient": 0.4 + 0.05 * rng.normal(), "shear_coefficient": 1.5 + 0.1 * rng.normal()}
+             for _ in range(12)]
+    model = functools.partial(_band_linear, "r2")
+    serial = band(model, draws, delta=0.1, seed=1)
+    pool = worker_pool(2)
+    try:
+        pooled = band(model, draws, delta=0.1, seed=1, pool=pool)
+    finally:
+        pool.shutdown()
+    assert serial.keys() == pooled.keys()
+    for column in serial:
+        np.testing.assert_array_equal(serial[column], pooled[column])
+
+
 def _product(target, case_file, values, fixed):
     x, _ = COVARIATES[target.name]
     a, b = values["channel_coefficient"], values["shear_coefficient"]

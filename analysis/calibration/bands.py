@@ -66,13 +66,15 @@ def parameter_samples(estimates: dict, covariance, keys, count: int, seed: int =
     return [dict(zip(keys, np.clip(row, low, high))) for row in draws]
 
 
-def band(model, samples, delta: float = 0.0, seed: int = 0, quantiles=QUANTILES) -> dict[str, np.ndarray]:
+def band(model, samples, delta: float = 0.0, seed: int = 0, quantiles=QUANTILES, pool=None) -> dict[str, np.ndarray]:
     """{column: array (len(quantiles), ...)} of ``model(values) -> {column: value or array}`` over the parameter
-    ``samples``, each output times exp(delta z), z ~ N(0, 1) per sample and column."""
+    ``samples``, each output times exp(delta z), z ~ N(0, 1) per sample and column. ``pool`` (a process pool, with
+    a picklable ``model``) runs the samples side by side: the same band."""
     rng = np.random.default_rng(seed + 1)
     outputs: dict[str, list] = {}
-    for values in samples:
-        result = model(values)
+    results = [pool.submit(model, values) for values in samples] if pool is not None else map(model, samples)
+    for result in results:
+        result = result.result() if pool is not None else result
         for column, value in result.items():
             outputs.setdefault(column, []).append(np.asarray(value, dtype=float) * math.exp(delta * rng.normal()))
     return {c: np.nanquantile(np.stack(v), quantiles, axis=0) for c, v in outputs.items()}

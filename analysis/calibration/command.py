@@ -19,6 +19,9 @@ def run_set(args) -> int:
     samples = getattr(args, "band_samples", 20)
     if samples < 0 or samples in (1, 2, 3, 4):
         raise OutputError(f"--band-samples {samples!r}: allowed 0 (no bands) or an integer of at least 5")
+    workers = getattr(args, "workers", 1)
+    if workers < 1:
+        raise OutputError(f"--workers {workers!r}: allowed an integer >= 1")
     if leave_out and args.write:
         raise OutputError(f"--write {args.write} with --leave-out {leave_out}: a cross-validation fit leaves runs out "
                           "on purpose and is not a calibration layer; allowed: --out DIR for its results")
@@ -31,7 +34,7 @@ def run_set(args) -> int:
                   "scored below with the pre-registered hold-outs")
         result = calibrate_set(registry, args.reference_dir, max_evaluations=args.max_evaluations,
                                progress=not args.quiet, band_samples=samples,
-                               closures=getattr(args, "closures", "designed"))
+                               closures=getattr(args, "closures", "designed"), workers=workers)
     except (RegistryError, FileNotFoundError) as exc:
         raise OutputError(str(exc)) from None
     text = result.summary()

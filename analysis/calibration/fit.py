@@ -78,14 +78,46 @@ class LevelFit:
     gate: dict = field(default_factory=dict)
 
 
+def _model_or_none(model, target, case_file, values, fixed):
+    """One target's model means in a worker process; None where popbal refuses the combination (CaseError)."""
+    from settler.cases import CaseError
+
+    try:
+        return model(target, case_file, values, fixed)
+    except CaseError:
+        return None
+
+
+def _one_thread():
+    """A worker's initializer: one Numba thread each, so that the workers share the cores instead of crowding them."""
+    import os
+
+    os.environ["NUMBA_NUM_THREADS"] = "1"
+    os.environ["OMP_NUM_THREADS"] = "1"
+
+
+def worker_pool(workers: int):
+    """A process pool of ``workers`` (spawned, one Numba thread each) for :func:`fit_level`, or None for 1.
+    ValueError below 1."""
+    if workers < 1:
+        raise ValueError(f"workers {workers!r}: allowed an integer >= 1")
+    if workers == 1:
+        return None
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_one_thread)
+
+
 class _Objective:
     """Weighted residuals of a level for parameter vectors; counts evaluations; a refused combination (a channel
     wider than the box) counts as far from every run."""
 
-    def __init__(self, targets, case_files, parameters, fixed, columns, progress, model=None):
+    def __init__(self, targets, case_files, parameters, fixed, columns, progress, model=None, pool=None):
         self.targets, self.case_files, self.parameters = targets, case_files, list(parameters)
         self.model = model or reduced_means
         self.fixed, self.columns, self.progress = dict(fixed or {}), list(columns), progress
+        self.pool = pool  # a process pool: the targets' model runs side by side (the same numbers, sooner)
         self.discrepancy = 0.0
         self.evaluations = 0
         self.last_means: dict[str, dict] = {}
@@ -100,6 +132,10 @@ class _Objective:
         self.evaluations += 1
         if self.progress:
             print(f"\rcalibrate: model run {self.evaluations}", end="", file=sys.stderr, flush=True)
+        if self.pool is not None:
+            jobs = {t.name: self.pool.submit(_model_or_none, self.model, t, self.case_files.get(t.name), values,
+                                             self.fixed) for t in self.targets}
+            return {name: job.result() for name, job in jobs.items()}
         out = {}
         for target in self.targets:
             try:
@@ -142,16 +178,17 @@ def _least_squares(objective, x0, low, high, budget):
 
 def fit_level(level: str, targets: list[Target], case_files: dict, parameters, start: dict, fixed: dict | None = None,
               columns=tuple(TARGET_COLUMNS), max_evaluations: int = 60, profile: bool = True,
-              progress: bool = True, model=None) -> LevelFit:
+              progress: bool = True, model=None, pool=None) -> LevelFit:
     """Fit ``parameters`` of one level to ``targets`` (module docstring), with the discrepancy and the gate.
 
     case_files: {run: its resolved case.toml}; start: {parameter: start value}; fixed: {section.key: value} applied
     to every run; max_evaluations: least-squares iterations per round (each costs p + 1 model runs of every target);
-    model: (target, case_file, values, fixed) -> {column: window mean}, default :func:`reduced_means` (popbal).
+    model: (target, case_file, values, fixed) -> {column: window mean}, default :func:`reduced_means` (popbal), a
+    module-level function where ``pool`` (:func:`worker_pool`) runs the targets side by side.
     """
     parameters = list(parameters)
     low, high = _bounds(parameters)
-    objective = _Objective(targets, case_files, parameters, fixed, columns, progress, model)
+    objective = _Objective(targets, case_files, parameters, fixed, columns, progress, model, pool)
     x = np.array([float(start[p]) for p in parameters])
     m, p = len(targets) * len(columns), len(parameters)
     status = ""

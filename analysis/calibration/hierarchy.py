@@ -24,6 +24,7 @@ parameter distribution and discrepancy (:mod:`analysis.calibration.bands`).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -338,9 +339,22 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
 
 def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
                   profile: bool = True, progress: bool = True, band_samples: int = BAND_SAMPLES,
-                  closures: str = "designed") -> Hierarchy:
+                  closures: str = "designed", workers: int = 1) -> Hierarchy:
     """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds, with the
-    closure set ``closures`` (:data:`CLOSURES`)."""
+    closure set ``closures`` (:data:`CLOSURES`); ``workers`` processes run each evaluation's popbal runs side by
+    side (:func:`analysis.calibration.fit.worker_pool`: the same numbers)."""
+    from .fit import worker_pool
+
+    pool = worker_pool(workers)
+    try:
+        return _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, band_samples, closures,
+                              pool)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+
+
+def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, band_samples, closures, pool):
     if closures not in CLOSURES:
         raise ValueError(f"closures {closures!r}: allowed {', '.join(CLOSURES)}")
     from settler.cases import load_case
@@ -375,7 +389,8 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
         parameters = CLOSURES[closures]["levels"][level]
         columns = CLOSURES[closures].get("columns", {}).get(level, tuple(TARGET_COLUMNS))
         fit = fit_level(level, targets, case_files, parameters, {p: START[p] for p in parameters}, fixed,
-                        columns=columns, max_evaluations=max_evaluations, profile=profile, progress=progress)
+                        columns=columns, max_evaluations=max_evaluations, profile=profile, progress=progress,
+                        pool=pool)
         levels.append(fit)
         for name in parameters:
             values[name] = (fit.estimates[name], fit.standard_errors[name])
@@ -384,7 +399,7 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
     holdout_errors, coverage_result = None, None
     if gate_passed and not any(missing.values()):
         holdout_errors, coverage_result = _score_holdouts(registry, reference_dir, seed, fixed, values, levels,
-                                                          band_samples)
+                                                          band_samples, pool)
     missing[HOLDOUTS_KEY] = _stored(registry.holdouts, reference_dir)[1]  # never scored, whatever the fit
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
@@ -392,7 +407,14 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
                      roof=roof, floor=floor, spread=measured["spread"])
 
 
-def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, samples):
+def _band_means(target, case_file, fixed, values):
+    """popbal's window means of one hold-out at one parameter draw (picklable for a worker pool)."""
+    from .fit import reduced_means
+
+    return reduced_means(target, case_file, values, fixed)
+
+
+def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, samples, pool=None):
     """The hold-outs' relative errors at the estimates, and the coverage of their window means by the 90 % bands
     of ``samples`` popbal runs over the calibration's parameter distribution and discrepancy
     (:mod:`analysis.calibration.bands`)."""
@@ -420,7 +442,8 @@ def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, sample
         errors[run] = {c: means[c] / target.means[c] - 1.0 for c in TARGET_COLUMNS}
         if samples == 0:
             continue
-        bands[run] = band(lambda v: reduced_means(target, case_file, v, fixed), draws, delta, seed=1)
+        bands[run] = band(functools.partial(_band_means, target, case_file, fixed), draws, delta, seed=1,
+                          pool=pool)
         observed[run] = dict(target.means)
     if samples == 0:
         return errors, None
