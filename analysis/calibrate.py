@@ -602,8 +602,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the mean diameter and axis velocity alone) or 'zones_drain' ('zones_line' with the "
                              "roof's thickness from its drainage law, popbal.roof_thickness_form = 'drainage') or "
                              "'zones_core' ('zones_drain' with the plume's slag core apart from the droplets' "
-                             "channel, popbal.plume_core_radius, fitted with the channel and the shear coefficient "
-                             "at the whole level alone); analysis.calibration.hierarchy.CLOSURES; default designed")
+                             "channel, popbal.plume_core_radius, fitted with the channel's radius factor at the whole "
+                             "level alone); analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
                              "no bands, the errors only)")

@@ -853,9 +853,9 @@ def test_a_layer_names_the_reference_set_engine_it_was_fitted_to():
 
 
 def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_level_alone(tmp_path, monkeypatch):
-    """'zones_core': no transport level (the plume laws as derived: channel_coefficient and return_flow_ratio 1);
-    the whole level fits the shear coefficient, the compact slag core R_0 and the channel's radius factor, none of
-    which the fixed values may override; the floor's f_b is measured at the fit's start radii; the spread core's
+    """'zones_core': no transport level (the plume laws as derived: channel_coefficient and return_flow_ratio 1,
+    the shear coefficient as defined, 1); the whole level fits the compact slag core R_0 and the channel's radius
+    factor, neither of which the fixed values may override; the floor's f_b is measured at the fit's start radii; the spread core's
     share is measured (stubbed here) with R_0 at its start; the layer is valid TOML that writes the 'inlet' form,
     the fitted radius factor and the measured share once each."""
     import tomllib
@@ -880,7 +880,7 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
         names = list(parameters)
         assert start == {n: h.START[n] for n in names}
         return LevelFit(level=level, runs=list(case_files), parameters=names,
-                        estimates={"shear_coefficient": 2.0, "plume_core_radius": 0.01, "channel_radius_factor": 0.45},
+                        estimates={"plume_core_radius": 0.01, "channel_radius_factor": 0.45},
                         standard_errors={n: 0.001 for n in names}, correlation=np.eye(len(names)), discrepancy=0.0,
                         chi2=1.0, residual_count=8, evaluations=3, status="converged", errors={},
                         gate={"passed": True, "reasons": []})
@@ -906,11 +906,11 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
     monkeypatch.setattr(h, "fit_level", fit_level)
     result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures="zones_core")
     assert list(fixed_at) == ["whole"]
-    assert [f.parameters for f in result.levels] == [["shear_coefficient", "plume_core_radius",
-                                                      "channel_radius_factor"]]
+    assert [f.parameters for f in result.levels] == [["plume_core_radius", "channel_radius_factor"]]
     whole = fixed_at["whole"]
-    assert not {"popbal.channel_radius_factor", "popbal.plume_core_radius", "popbal.shear_coefficient"} & set(whole)
+    assert not {"popbal.channel_radius_factor", "popbal.plume_core_radius"} & set(whole)
     assert whole["popbal.channel_radius_form"] == "inlet" and whole["popbal.channel_coefficient"] == 1.0
+    assert whole["popbal.shear_coefficient"] == 1.0
     assert whole["popbal.spread_core_share"] == 0.42 and spread_at["popbal.plume_core_radius"] == 0.0095
     assert result.floor["runs"] == ["a", "b"]
     layer = tomllib.loads(write_layer(result, tmp_path / "core.toml", tmp_path / "holdouts.toml", "x").read_text())
