@@ -146,8 +146,13 @@ fast, one at 10.5 mm their axis with the counts two to three times too high (doc
 R_s the confined law's coefficient c(R / R_s) and the return share S(R / R_s) are the slag core's, and R_c (the
 channel's load, collisions and shear) is capped at R_s: u_s = sqrt(c_ch c(R / R_s) Q drho g / (pi mu)) whatever
 R_c, and the cloud law c_ch c(R / R_s) phi drho g R_c^2 / mu still carries u_s (its load is the same line force
-spread over pi R_c^2). An exploratory form, measured with each run's own R*_t as R_s (an oracle) and not yet
-given a law; no stored layer sets it.
+spread over pi R_c^2). Measured first with each run's own R*_t as R_s (an oracle). Two bounds make it one closure
+for the coalescing training runs (closure set zones_core, docs/guide/reduced-model.md): in a narrow column the core
+is at most ``plume_core_column_share`` beta of the column's radius R (deep's feed in its 20 mm column: 0.62), and a
+plume whose feed Reynolds number rho_s Q_ch / (mu R_0) (:func:`feed_reynolds`) reaches ``spread_flux_reynolds``
+spreads its core over ``spread_core_share`` s of R (simple and cubic: R* / R = 0.42). The boundary is bracketed by
+the regime runs (compact at 0.62, spread at 0.70 and 1.24 with R_0 = 9.5 mm), not derived; it does not hold the
+coalescence-off demo at 2.5 mm cells, whose plume spreads at 0.31.
 
 Roof layer (``roof_layer_coefficient`` c_L, ``roof_thickness`` delta; zone "roof"). In the full runs about half of
 the demo family's droplets sit in the top 10 mm, under the inlet (data/reference/<run>/zones.csv: the roof layer's
