@@ -185,8 +185,9 @@ def build(case: Case) -> Model:
     z = (np.arange(cells) + 0.5) * dz
     # the droplets' cloud law in the plume carries them at transport x u_s (steady), so its coefficient is c_ch x t^2,
     # times the confined plume's c(R / R_c) under popbal.confinement, which u_s holds (channel_closure)
-    law = closures.PLUME_LAWS[p.plume_law or "uniform_core"]  # of the slag core R_s (R_c unless plume_core_radius)
-    confined = law(column_radius(case) / core_radius(case, channel_radius)) \
+    law = closures.PLUME_LAWS[p.plume_law or "uniform_core"]
+    slag_core = core_radius(case, channel_radius)  # R_s of the confined laws (R_c unless plume_core_radius)
+    confined = law(column_radius(case) / slag_core) \
         if p.confinement and plume_velocity > 0.0 and channel_radius > 0.0 else 1.0
     plume_coefficient = p.channel_coefficient * confined * transport**2
     cloud_coefficient, cloud_radius = closures.cloud_profile(z, g.height, channel_radius, plume_coefficient,
@@ -294,7 +295,7 @@ def build(case: Case) -> Model:
         raise CaseError(f"popbal.return_flow_ratio = {ratio!r}: needs a channel zone inside the box "
                         "(popbal.channel_radius_factor > 0); allowed: 0 without one")
     if p.confinement and ratio > 0.0:  # r multiplies the confined Stokes plume's return share S(R / R_c)
-        ratio *= closures.confined_return_share(column_radius(case) / core_radius(case, channel_radius))
+        ratio *= closures.confined_return_share(column_radius(case) / slag_core)
     return_velocity = closures.return_velocity(ratio, plume_velocity)
     parameters["bottom_lift"], parameters["bottom_lift_velocity"] = bottom_lift(case, bottom_thickness,
                                                                                 return_velocity)
@@ -490,11 +491,7 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
     if p.plume_core_radius is None:
         return channel_radius
     column = column_radius(case)
-    core = p.plume_core_radius
-    if p.spread_flux_reynolds is not None:
-        flux = case.feed.mass_rate * p.channel_feed_fraction / case.matte.density
-        if closures.feed_reynolds(flux, core, case.slag.density, case.slag_viscosity) >= p.spread_flux_reynolds:
-            core = p.spread_core_share * column
+    core = p.spread_core_share * column if plume_spreads(case) else p.plume_core_radius
     if p.plume_core_column_share is not None:
         core = min(core, p.plume_core_column_share * column)
     if core >= column:
@@ -503,6 +500,20 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
                         "return flow; allowed: a smaller plume_core_radius, plume_core_column_share or "
                         "spread_core_share")
     return core
+
+
+def channel_volume_flux(case: Case) -> float:
+    """Q_ch [m^3/s]: the matte feed's volume rate that enters the channel (popbal.channel_feed_fraction of it)."""
+    return case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
+
+
+def plume_spreads(case: Case) -> bool:
+    """The slag core's regime (popbal.closures): True where popbal.spread_flux_reynolds is given and the feed
+    Reynolds number rho_s Q_ch / (mu R_0) at popbal.plume_core_radius R_0 reaches it."""
+    p = case.popbal
+    return p.spread_flux_reynolds is not None and closures.feed_reynolds(
+        channel_volume_flux(case), p.plume_core_radius, case.slag.density, case.slag_viscosity) \
+        >= p.spread_flux_reynolds
 
 
 def column_radius(case: Case) -> float:
@@ -519,7 +530,7 @@ def channel_closure(case: Case) -> tuple[float, float, float, float]:
     ``popbal.plume_law`` (popbal.closures.PLUME_LAWS; solved with R_c by popbal.closures.confined_closure); Re = rho_s u_s R_c / mu; transport factor 1 / (1 + Re / plume_reynolds_scale) (1 without).
     """
     p, g = case.popbal, case.geometry
-    volume_flux = case.feed.mass_rate * p.channel_feed_fraction / case.matte.density
+    volume_flux = channel_volume_flux(case)
     excess = case.matte.density - case.slag.density
     if p.plume_law and not p.confinement:
         raise CaseError(f"popbal.plume_law = {p.plume_law!r}: the law of the confined plume's coefficient; allowed "

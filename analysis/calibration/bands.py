@@ -72,9 +72,12 @@ def band(model, samples, delta: float = 0.0, seed: int = 0, quantiles=QUANTILES,
     a picklable ``model``) runs the samples side by side: the same band."""
     rng = np.random.default_rng(seed + 1)
     outputs: dict[str, list] = {}
-    results = [pool.submit(model, values) for values in samples] if pool is not None else map(model, samples)
+    if pool is not None:
+        jobs = [pool.submit(model, values) for values in samples]
+        results = (job.result() for job in jobs)
+    else:
+        results = map(model, samples)
     for result in results:
-        result = result.result() if pool is not None else result
         for column, value in result.items():
             outputs.setdefault(column, []).append(np.asarray(value, dtype=float) * math.exp(delta * rng.normal()))
     return {c: np.nanquantile(np.stack(v), quantiles, axis=0) for c, v in outputs.items()}

@@ -79,7 +79,8 @@ class LevelFit:
 
 
 def _model_or_none(model, target, case_file, values, fixed):
-    """One target's model means in a worker process; None where popbal refuses the combination (CaseError)."""
+    """One target's model means (here or in a worker process); None where popbal refuses the combination
+    (CaseError)."""
     from settler.cases import CaseError
 
     try:
@@ -126,23 +127,15 @@ class _Objective:
         return math.hypot(target.standard_errors[column], self.discrepancy * abs(target.means[column]))
 
     def means(self, x):
-        from settler.cases import CaseError
-
         values = dict(zip(self.parameters, x))
         self.evaluations += 1
         if self.progress:
             print(f"\rcalibrate: model run {self.evaluations}", end="", file=sys.stderr, flush=True)
+        args = [(self.model, t, self.case_files.get(t.name), values, self.fixed) for t in self.targets]
         if self.pool is not None:
-            jobs = {t.name: self.pool.submit(_model_or_none, self.model, t, self.case_files.get(t.name), values,
-                                             self.fixed) for t in self.targets}
-            return {name: job.result() for name, job in jobs.items()}
-        out = {}
-        for target in self.targets:
-            try:
-                out[target.name] = self.model(target, self.case_files.get(target.name), values, self.fixed)
-            except CaseError:
-                out[target.name] = None
-        return out
+            jobs = [self.pool.submit(_model_or_none, *a) for a in args]
+            return {t.name: job.result() for t, job in zip(self.targets, jobs)}
+        return {t.name: _model_or_none(*a) for t, a in zip(self.targets, args)}
 
     def sigmas(self) -> np.ndarray:
         return np.array([self.sigma(t, c) for t in self.targets for c in self.columns])

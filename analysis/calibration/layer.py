@@ -61,12 +61,11 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
                                                 "applies this layer)") + ".", "", "[popbal]",
              f"collision_efficiency = {c['efficiency']!r}  # - [derived] level collision: the kernel run's merges "
              f"over its gravitational collisions{' cell by cell' if c.get('form') == 'cell' else ''}, standard error "
-             f"{c['standard_error']:.3g}",
-             f"channel_radius_factor = {k_r['value']!r}  # - [derived] phi_p^(-1/2) of the plume core's volume "
-             f"fraction {k_r['core_fraction']:.4g} in the zone diagnostics of {', '.join(k_r['runs'])}"
-             + (" (the dilution law's Re -> 0 limit)" if "reynolds" in k_r else "")]
-    if any("channel_radius_factor" in fit.parameters for fit in result.levels):
-        lines.pop()  # fitted below
+             f"{c['standard_error']:.3g}"]
+    if not any("channel_radius_factor" in fit.parameters for fit in result.levels):  # else fitted, below
+        lines.append(f"channel_radius_factor = {k_r['value']!r}  # - [derived] phi_p^(-1/2) of the plume core's "
+                     f"volume fraction {k_r['core_fraction']:.4g} in the zone diagnostics of "
+                     f"{', '.join(k_r['runs'])}" + (" (the dilution law's Re -> 0 limit)" if "reynolds" in k_r else ""))
     if "reynolds" in k_r:
         lines.append(f"plume_dilution_reynolds = {k_r['reynolds']!r}  # - [derived] Re_d of phi_p = k_R^-2 / (1 + Re "
                      f"/ Re_d) over the same zone diagnostics, standard error "

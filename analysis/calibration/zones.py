@@ -53,6 +53,7 @@ def dilution_from_zones(runs, reference_dir: str | Path) -> dict:
     Returns {"value": k_R, "core_fraction": k_R^-2, "reynolds": Re_d, "standard_errors": {...}, "correlation",
     "rms" (of the log residuals), "per_run": {run: (phi_p, Re)}, "excluded": {run: why}, "runs"}."""
     from popbal.closures import plume_reynolds
+    from popbal.model import channel_volume_flux
     from settler.cases import load_case
 
     per_run, excluded = {}, {}
@@ -61,7 +62,7 @@ def dilution_from_zones(runs, reference_dir: str | Path) -> dict:
         phi = float(_core_band(folder, "zone_profile.csv")["core_volume_fraction"].mean())
         u = float(_core_band(folder, "channel_profile.csv")["channel_velocity"].mean())
         case = load_case(folder / "case.toml")
-        flux = case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
+        flux = channel_volume_flux(case)
         radius = math.sqrt(flux / (math.pi * phi * u))
         if radius > 0.5 * case.geometry.inlet_diameter:
             excluded[run] = (f"R {radius * 1e3:.3g} mm over the inlet radius "
@@ -311,17 +312,14 @@ def spread_share_from_groups(runs, reference_dir: str | Path, fixed: dict) -> di
     ``runs`` whose feed Reynolds number rho_s Q / (mu R_0) reaches popbal.spread_flux_reynolds under ``fixed``
     ({dotted key: value}, with popbal.plume_core_radius R_0), with its standard error; ValueError where none does."""
     from analysis.groups import stored_measured_groups
-    from popbal.closures import feed_reynolds
-    from popbal.model import column_radius
+    from popbal.model import column_radius, plume_spreads
     from settler.cases import load_case
 
     shares = {}
     for run in runs:
         folder = Path(reference_dir) / run
         case = load_case(folder / "case.toml", {k: v for k, v in fixed.items() if k.startswith("popbal.")})
-        flux = case.feed.mass_rate * case.popbal.channel_feed_fraction / case.matte.density
-        if feed_reynolds(flux, fixed["popbal.plume_core_radius"], case.slag.density,
-                         case.slag_viscosity) >= fixed["popbal.spread_flux_reynolds"]:
+        if plume_spreads(case):  # popbal's own rule
             shares[run] = stored_measured_groups(folder)["core_radius"] / column_radius(case)
     if not shares:
         raise ValueError(f"no run of {', '.join(runs) or 'none'} is spread by the regime rule: the spread core's "
