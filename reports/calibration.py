@@ -398,19 +398,22 @@ display(Markdown("\n\n".join(said)))
 # %% [markdown]
 # ## The hierarchical calibration against the designed set, and its prediction bands
 #
-# `data/calibration/designed.toml` is the layer of `settler calibrate --set data/calibration/holdouts.toml`
-# (`analysis.calibration`): the collision efficiency from the kernel run's merges alone, the plume coefficient and
-# return-flow ratio from the coalescence-off runs, the shear coefficient from the whole runs, each level with its
+# The current layer (`analysis.calibration.bands.CURRENT_LAYER`, `data/calibration/<name>.toml`) is the layer of
+# `settler calibrate --set data/calibration/holdouts.toml --closures NAME` (`analysis.calibration`): the collision
+# efficiency from the kernel run's merges alone, then the levels its closure set fits (for 'designed' the plume
+# coefficient and return-flow ratio from the coalescence-off runs and the shear coefficient from the whole runs; for
+# 'zones_core' the slag core's and the droplets' channel radii from the whole runs), each level with its
 # identifiability gate, and the hold-outs named in `holdouts.toml` before any fit scored only after every gate
 # passed. The hold-outs' 90 % prediction bands are popbal over the layer's parameter covariance with its log-normal
 # model discrepancy (`analysis.calibration.bands`); the check is the share of their window means inside. The layer
-# is read as committed (quick or not): the whole hierarchy takes about 47 minutes on 2 cores. No preset applies it.
+# is read as committed (quick or not): the whole hierarchy takes one to two hours on 2 cores.
 
 # %%
+from analysis.calibration.bands import CURRENT_LAYER
 from analysis.calibration.layer import fitted_set_engine
 from analysis.calibration.targets import TARGET_COLUMNS, load_target, seed_scatter
 
-designed_path = calibration_path("designed")
+designed_path = calibration_path(CURRENT_LAYER)
 designed = tomllib.loads(designed_path.read_text())
 dprov = designed["provenance"]
 print(f"layer {designed_path.name}: command {dprov['command']!r}; code {dprov['code_commit'][:10]}"
@@ -418,7 +421,8 @@ print(f"layer {designed_path.name}: command {dprov['command']!r}; code {dprov['c
 level_rows = [{"level": "collision", "parameter": "collision_efficiency", "runs": "kernel",
                "estimate": dprov["collision"]["efficiency"], "standard error": dprov["collision"]["standard_error"],
                "profile 95 %": "–", "discrepancy": math.nan}]
-for level in ("transport", "whole"):
+fitted_levels = [level for level in ("transport", "whole") if level in dprov]
+for level in fitted_levels:
     table = dprov[level]
     for name in (k for k in table if isinstance(table[k], list) and f"correlation_{k}" in table):
         estimate, se, low, high = table[name]
@@ -430,8 +434,8 @@ pd.DataFrame(level_rows).style.format({"estimate": "{:.4g}", "standard error": "
 
 # %%
 error_rows = []
-for level in ("transport", "whole", "holdouts"):
-    for key, values in dprov[level].items():
+for level in (*fitted_levels, "holdouts"):
+    for key, values in dprov.get(level, {}).items():
         if key.startswith("error_"):
             role = "held out" if level == "holdouts" else f"fitted ({level})"
             limit = 0.2 if level == "holdouts" else 0.1
@@ -446,7 +450,7 @@ errors_designed.style.format({c: "{:+.1f}" for c in TARGET_COLUMNS}).hide(axis="
 
 # %%
 seed = seed_scatter(root)
-holdout_runs = [k[len("error_"):] for k in dprov["holdouts"] if k.startswith("error_")
+holdout_runs = [k[len("error_"):] for k in dprov.get("holdouts", {}) if k.startswith("error_")
                 and f"band_{k[len('error_'):]}_{list(TARGET_COLUMNS)[0]}" in dprov["holdouts"]]
 # The bands are checked against the stored runs only where they are the runs the layer was fitted to: the same set
 # engine (data/reference/engines.toml) at the layer's code commit as now.
@@ -495,7 +499,7 @@ else:
 gate_words = ("Every level passes the identifiability gate, and yet" if dprov["gate_passed"] else
               "The identifiability gate fails (the hold-outs are not scored);")
 display(Markdown(
-    f"**What the designed calibration shows.** {gate_words} "
+    f"**What the {dprov['closures']} calibration shows.** {gate_words} "
     f"{int(within.get(False, 0))} of {int(counts.get(False, 0))} fitted window means are within 10 % and "
     f"{int(within.get(True, 0))} of {int(counts.get(True, 0))} held-out ones within 20 %: the gate says the "
     "parameters are determined, not that the model is right. The whole level absorbs a model discrepancy of "

@@ -256,7 +256,8 @@ print(f"baseline loss at the layer's collision efficiency {efficiency:.3g}: {100
 # Its loss is converted to copper in the tapped slag with a matte of 60 wt % Cu (the seed paper's 55-70 %):
 # Cu = 100 L m_matte w_Cu / (m_slag + L m_matte) (`analysis.sweep.furnace_band`).
 #
-# The band is the hierarchical calibration's (`data/calibration/designed.toml`, `settler calibrate --set`): the
+# The band is the current hierarchical calibration's (`analysis.calibration.bands.CURRENT_LAYER`, written by
+# `settler calibrate --set`): the
 # collision efficiency drawn from its kernel-run estimate and standard error (the furnace has no plume channel, so
 # the layer's plume closures do not enter), and each run's loss times the layer's log-normal model discrepancy
 # exp(delta z), the error it measured on the 0.2 m boxes. **The furnace lies far outside what the layer was fitted
@@ -264,9 +265,10 @@ print(f"baseline loss at the layer's collision efficiency {efficiency:.3g}: {100
 # furnace does.
 
 # %%
+from analysis.calibration.bands import CURRENT_LAYER
 from analysis.sweep import furnace_band
 
-band_layer = "designed"
+band_layer = CURRENT_LAYER
 band_samples = 5 if quick else 20
 resolution = sweep.FURNACE_QUICK if quick else {}
 preset_band = furnace_band.loss_band(resolution, band_layer, band_samples)

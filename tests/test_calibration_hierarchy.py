@@ -341,11 +341,13 @@ def test_settler_calibrate_set_refuses_bad_cross_validation_options(extra, messa
 
 
 @pytest.mark.slow
-def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command(tmp_path):
-    """The committed hierarchical layer (data/calibration/designed.toml) comes back from the command in its
+@pytest.mark.parametrize("name", ["designed", "zones_core"])
+def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command(tmp_path, name):
+    """Each committed hierarchical layer (data/calibration/<name>.toml) comes back from the command in its
     [provenance], run on a clean checkout of its recorded code commit (the reference runs of that commit: a run
     stored later, such as a new seed pair, changes the weights): the same [popbal] values to 1e-9 (popbal and the
-    fit are deterministic), and a provenance that names no machine folder. About 40 minutes on two cores."""
+    fit are deterministic, serial or in worker processes), and a provenance that names no machine folder. About 40
+    minutes (designed) and two hours (zones_core) on two cores."""
     import os
     import shlex
     import subprocess
@@ -354,9 +356,9 @@ def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    stored_path = root / "data" / "calibration" / "designed.toml"
+    stored_path = root / "data" / "calibration" / f"{name}.toml"
     if not stored_path.is_file() or not (root / ".git").exists():
-        pytest.skip("needs data/calibration/designed.toml in a git checkout")
+        pytest.skip(f"needs data/calibration/{name}.toml in a git checkout")
     stored = tomllib.loads(stored_path.read_text())
     provenance = stored["provenance"]
     assert provenance["code_tree_dirty"] is False

@@ -26,6 +26,10 @@ from .uncertainty import PARAMETERS
 
 QUANTILES = (0.05, 0.5, 0.95)
 
+#: The hierarchical layer (data/calibration/<name>.toml) whose bands the calibration and trends reports and the
+#: furnace band draw: the latest ``settler calibrate --set`` layer whose gate passed.
+CURRENT_LAYER = "designed"
+
 
 def covariance_from_layer(path) -> tuple[dict[str, float], np.ndarray, list[str], float]:
     """(estimates {key: value}, covariance (p, p), keys in its order, the largest level discrepancy delta [-]) of
@@ -100,13 +104,14 @@ def coverage(bands: dict[str, dict[str, np.ndarray]], observed: dict[str, dict[s
     return {"inside": inside, "total": total, "share": inside / total if total else math.nan, "outside": outside}
 
 
-def layer_samples(layer: str, count: int, seed: int = 0) -> tuple[list[dict[str, float]], float]:
+def layer_samples(layer: str | None, count: int, seed: int = 0) -> tuple[list[dict[str, float]], float]:
     """(``count`` parameter draws, the discrepancy delta [-]) of the calibration layer named ``layer``
-    (data/calibration/<layer>.toml, written by ``settler calibrate --set``). Raises ValueError for a layer without
+    (data/calibration/<layer>.toml, written by ``settler calibrate --set``; None: :data:`CURRENT_LAYER`). Raises ValueError for a layer without
     the hierarchy's provenance (a one-level layer such as ``paper`` records no covariance between its levels),
     settler.cases.CaseError for a name that is not a layer."""
     from settler.cases import calibration_path, read_calibration
 
+    layer = layer or CURRENT_LAYER
     read_calibration(layer)  # the clear error for a name that is not a layer
     estimates, covariance, keys, delta = covariance_from_layer(calibration_path(layer))
     return parameter_samples(estimates, covariance, keys, count, seed=seed), delta

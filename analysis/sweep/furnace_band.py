@@ -56,9 +56,10 @@ def _loss(case) -> float:
     return summarize(popbal.run(popbal.setup(case), progress=False).timeseries)["matte_loss"]
 
 
-def loss_band(overrides: dict, layer: str = "designed", samples: int = 20, seed: int = 0, base: str = "furnace",
+def loss_band(overrides: dict, layer: str | None = None, samples: int = 20, seed: int = 0, base: str = "furnace",
               keys=("collision_efficiency",)) -> dict:
-    """The matte loss of preset ``base`` with ``overrides`` under calibration ``layer``: the layer's draws of the
+    """The matte loss of preset ``base`` with ``overrides`` under calibration ``layer`` (None: the current layer,
+    :data:`analysis.calibration.bands.CURRENT_LAYER`): the layer's draws of the
     [popbal] ``keys`` (default the collision efficiency alone: the furnace keeps its own no-channel zones, which the
     layer's plume closures do not describe) applied to the preset. Returns {"losses": (samples,) each draw's loss
     times its discrepancy factor, "quantiles": their 5/50/95 % [-], "at_estimates": the loss at the layer's mean of
@@ -78,7 +79,7 @@ def loss_band(overrides: dict, layer: str = "designed", samples: int = 20, seed:
             "draws": {k: np.array([d[k] for d in draws]) for k in keys}}
 
 
-def banded_trends(base_overrides: dict, axes: dict, points: int, layer: str = "designed", samples: int = 10,
+def banded_trends(base_overrides: dict, axes: dict, points: int, layer: str | None = None, samples: int = 10,
                   progress=None) -> pd.DataFrame:
     """One-at-a-time trends with bands: for each key of :data:`BAND_KEYS` in ``axes`` ({key: (low, high, ...)}),
     ``points`` values over its range (linear), the others at ``base_overrides``; per point :func:`loss_band` with the
