@@ -503,5 +503,5 @@ display(Markdown(
     f"{int(within.get(False, 0))} of {int(counts.get(False, 0))} fitted window means are within 10 % and "
     f"{int(within.get(True, 0))} of {int(counts.get(True, 0))} held-out ones within 20 %: the gate says the "
     "parameters are determined, not that the model is right. The whole level absorbs a model discrepancy of "
-    f"{dprov['whole']['discrepancy']:.2g} (relative), which is what widens the bands. The closures are not yet the "
-    "ones the reference set asks for (docs/guide/reduced-model.md says what the set shows popbal lacks)."))
+    f"{dprov['whole']['discrepancy']:.2g} (relative), which sets the bands' width; docs/guide/reduced-model.md says "
+    "which closures are laws, which are measured and which are fitted, and what the set shows popbal still lacks."))

@@ -28,7 +28,7 @@ QUANTILES = (0.05, 0.5, 0.95)
 
 #: The hierarchical layer (data/calibration/<name>.toml) whose bands the calibration and trends reports and the
 #: furnace band draw: the latest ``settler calibrate --set`` layer whose gate passed.
-CURRENT_LAYER = "designed"
+CURRENT_LAYER = "zones_core"
 
 
 def covariance_from_layer(path) -> tuple[dict[str, float], np.ndarray, list[str], float]:
@@ -106,9 +106,9 @@ def coverage(bands: dict[str, dict[str, np.ndarray]], observed: dict[str, dict[s
 
 def layer_samples(layer: str | None, count: int, seed: int = 0) -> tuple[list[dict[str, float]], float]:
     """(``count`` parameter draws, the discrepancy delta [-]) of the calibration layer named ``layer``
-    (data/calibration/<layer>.toml, written by ``settler calibrate --set``; None: :data:`CURRENT_LAYER`). Raises ValueError for a layer without
-    the hierarchy's provenance (a one-level layer such as ``paper`` records no covariance between its levels),
-    settler.cases.CaseError for a name that is not a layer."""
+    (data/calibration/<layer>.toml, written by ``settler calibrate --set``; None: :data:`CURRENT_LAYER`). Raises
+    ValueError for a layer without the hierarchy's provenance (a one-level layer such as ``paper`` records no
+    covariance between its levels), settler.cases.CaseError for a name that is not a layer."""
     from settler.cases import calibration_path, read_calibration
 
     layer = layer or CURRENT_LAYER
