@@ -496,7 +496,7 @@ else:
           f"layer: {recorded:.3g}); an honest band holds about 90 %")
 
 # %%
-gate_words = ("Every level passes the identifiability gate, and yet" if dprov["gate_passed"] else
+gate_words = ("Every level passes the identifiability gate;" if dprov["gate_passed"] else
               "The identifiability gate fails (the hold-outs are not scored);")
 display(Markdown(
     f"**What the {dprov['closures']} calibration shows.** {gate_words} "

@@ -117,15 +117,16 @@ def layer_samples(layer: str | None, count: int, seed: int = 0) -> tuple[list[di
     return parameter_samples(estimates, covariance, keys, count, seed=seed), delta
 
 
-def sample_runs(case_file, layer: str, count: int, end_time: float, output_interval: float, seed: int = 0,
+def sample_runs(case_file, layer: str | None, count: int, end_time: float, output_interval: float, seed: int = 0,
                 progress=None) -> tuple[list, float]:
     """popbal's time series (pandas DataFrames, SI units) on the case ``case_file`` with the calibration layer
-    ``layer`` applied (``case.calibration = layer``: its [popbal] values replace the case's) and each of ``count``
-    parameter draws of :func:`layer_samples` on top, run to ``end_time`` [s] with rows every ``output_interval``
-    [s]; and the layer's discrepancy delta [-]. ``progress``: a callable of (done, total) or None."""
+    ``layer`` (None: :data:`CURRENT_LAYER`) applied (``case.calibration = layer``: its [popbal] values replace the
+    case's) and each of ``count`` parameter draws of :func:`layer_samples` on top, run to ``end_time`` [s] with rows
+    every ``output_interval`` [s]; and the layer's discrepancy delta [-]. ``progress``: a callable of (done, total) or None."""
     import popbal
     from settler.cases import load_case
 
+    layer = layer or CURRENT_LAYER
     draws, delta = layer_samples(layer, count, seed)
     series = []
     for k, values in enumerate(draws):
