@@ -413,10 +413,10 @@ from analysis.calibration.bands import CURRENT_LAYER
 from analysis.calibration.layer import fitted_set_engine
 from analysis.calibration.targets import TARGET_COLUMNS, load_target, seed_scatter
 
-designed_path = calibration_path(CURRENT_LAYER)
-designed = tomllib.loads(designed_path.read_text())
-dprov = designed["provenance"]
-print(f"layer {designed_path.name}: command {dprov['command']!r}; code {dprov['code_commit'][:10]}"
+layer_path = calibration_path(CURRENT_LAYER)
+current = tomllib.loads(layer_path.read_text())
+dprov = current["provenance"]
+print(f"layer {layer_path.name}: command {dprov['command']!r}; code {dprov['code_commit'][:10]}"
       f"{' (tree dirty)' if dprov['code_tree_dirty'] else ''}; gate {'passed' if dprov['gate_passed'] else 'FAILED'}")
 level_rows = [{"level": "collision", "parameter": "collision_efficiency", "runs": "kernel",
                "estimate": dprov["collision"]["efficiency"], "standard error": dprov["collision"]["standard_error"],
@@ -442,10 +442,10 @@ for level in (*fitted_levels, "holdouts"):
             error_rows.append({"run": key[len("error_"):], "role": role,
                                **{c: 100 * v for c, v in zip(TARGET_COLUMNS, values)},
                                "within target": sum(abs(v) <= limit for v in values)})
-errors_designed = pd.DataFrame(error_rows)
-within = errors_designed.groupby(errors_designed["role"] == "held out")["within target"].sum()
-counts = errors_designed.groupby(errors_designed["role"] == "held out").size() * len(TARGET_COLUMNS)
-errors_designed.style.format({c: "{:+.1f}" for c in TARGET_COLUMNS}).hide(axis="index").set_caption(
+errors_layer = pd.DataFrame(error_rows)
+within = errors_layer.groupby(errors_layer["role"] == "held out")["within target"].sum()
+counts = errors_layer.groupby(errors_layer["role"] == "held out").size() * len(TARGET_COLUMNS)
+errors_layer.style.format({c: "{:+.1f}" for c in TARGET_COLUMNS}).hide(axis="index").set_caption(
     "reduced / full - 1 [%] of the steady-window means; target: 10 % fitted, 20 % held out")
 
 # %%

@@ -122,7 +122,8 @@ def sample_runs(case_file, layer: str | None, count: int, end_time: float, outpu
     """popbal's time series (pandas DataFrames, SI units) on the case ``case_file`` with the calibration layer
     ``layer`` (None: :data:`CURRENT_LAYER`) applied (``case.calibration = layer``: its [popbal] values replace the
     case's) and each of ``count`` parameter draws of :func:`layer_samples` on top, run to ``end_time`` [s] with rows
-    every ``output_interval`` [s]; and the layer's discrepancy delta [-]. ``progress``: a callable of (done, total) or None."""
+    every ``output_interval`` [s]; and the layer's discrepancy delta [-]. ``progress``: a callable of (done, total)
+    or None."""
     import popbal
     from settler.cases import load_case
 
