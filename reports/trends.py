@@ -257,9 +257,9 @@ print(f"baseline loss at the layer's collision efficiency {efficiency:.3g}: {100
 # Cu = 100 L m_matte w_Cu / (m_slag + L m_matte) (`analysis.sweep.furnace_band`).
 #
 # The band is the current hierarchical calibration's (`analysis.calibration.bands.CURRENT_LAYER`, written by
-# `settler calibrate --set`): the collision efficiency drawn from its kernel-run estimate and standard error (the furnace has no plume channel, so
-# the layer's plume closures do not enter), and each run's loss times the layer's log-normal model discrepancy
-# exp(delta z), the error it measured on the 0.2 m boxes. **The furnace lies far outside what the layer was fitted
+# `settler calibrate --set`): the collision efficiency drawn from its kernel-run estimate and standard error (the
+# furnace has no plume channel, so the layer's plume closures do not enter), and each run's loss times the layer's
+# log-normal model discrepancy exp(delta z), the error it measured on the 0.2 m boxes. **The furnace lies far outside what the layer was fitted
 # on** (1 m and 6 h against 0.2-0.5 m and a minute): the band says what the calibration knows, not what the
 # furnace does.
 

@@ -105,9 +105,8 @@ def test_every_regenerated_run_ran_one_engine(set_folder):
         assert "the same run bit for bit" in e["check"]
 
 
-#: What all of data/reference/ may hold [bytes]: issue 21's budget of 40 MB, raised to 43 MB on 2026-12-07 for
-#: issue 22's resolved deep-family runs and new hold-outs (stored without snapshots; data/reference/README.md).
-STORAGE_LIMIT = 43_000_000
+#: What all of data/reference/ may hold [bytes] (issue 21's storage budget: 40 MB).
+STORAGE_LIMIT = 40_000_000
 
 
 @pytest.mark.parametrize("folder", SETS, ids=lambda p: p.name)
