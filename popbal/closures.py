@@ -225,6 +225,11 @@ settle hindered (the demo and deep's feed in its 50 mm column), pushed by the pl
 popbal's plume velocity, so the bottom layer's droplets may reach the floor at U_h + bottom_drain_coefficient x
 the plume's droplet velocity (transport x u_s); with coalescence they cross 3-13 times faster, mostly by growing.
 All three are exploratory closures, not yet calibrated (no stored layer sets them).
+The floor's shear (``bottom_shear_coefficient`` c_b; absent: shear_coefficient): G = c_b u_c t / h_b. The full runs'
+slag turns far more gently over the floor than the plume's speed over the layer's thickness says: their slag's shear
+rate at the bottom band's droplets is 0.11-0.21 of popbal's G at c_b = 1 in the nine coalescing training runs of the
+second registration (zones_core's values; 0.5-5.6 /s against 2.9-26 /s), geometric mean 0.157
+(:func:`analysis.calibration.zones.floor_shear_from_collisions`; 2026-12-07, docs/guide/reduced-model.md).
 
 The plume channel's own efficiency (``channel_collision_efficiency`` E_ch; absent: collision_efficiency). The
 channel holds its droplets well mixed over pi R_c^2, where the full runs' plume keeps them closer to the axis: the

@@ -243,9 +243,9 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
         work.velocities[zone] -= model.return_velocity  # the slag rises at u_up outside the plume
     if zone == ROOF:  # the slag feed flows through the roof at its inlet velocity, not spread over the box
         work.velocities[zone, -1] += model.roof_slag_velocity - model.downflow[-1]
-    if zone == BOTTOM:  # the plume turns over the layer's thickness: G = shear_coefficient u_c / h_b
+    if zone == BOTTOM:  # the plume turns over the layer's thickness: G = bottom_shear_coefficient u_c t / h_b
         work.shear[zone] = 0.0
-        work.shear[zone, 0] = p["shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \
+        work.shear[zone, 0] = p["bottom_shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \
             / model.bottom_thickness
         # the plume's discharge drives the layer's droplets into the floor (bottom_drain_coefficient; 0: none)
         work.velocities[zone, 0] += p["bottom_push"]

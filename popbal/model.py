@@ -261,6 +261,8 @@ def build(case: Case) -> Model:
         else p.channel_collision_efficiency,
         "roof_shear_coefficient": p.shear_coefficient if p.roof_shear_coefficient is None
         else p.roof_shear_coefficient,
+        "bottom_shear_coefficient": p.shear_coefficient if p.bottom_shear_coefficient is None
+        else p.bottom_shear_coefficient,
         # the plume's discharge pushes the bottom layer's droplets into the floor at bottom_drain_coefficient x the
         # plume's droplet velocity [m/s]
         "bottom_push": (p.bottom_drain_coefficient or 0.0) * plume_velocity * transport,
@@ -286,6 +288,7 @@ def build(case: Case) -> Model:
     roof_keys = "popbal.roof_layer_coefficient and popbal.roof_thickness (or popbal.roof_drainage_ratio)"
     for key, layer, needs in (("roof_collision_efficiency", roof_volume > 0.0, roof_keys),
                               ("roof_shear_coefficient", roof_volume > 0.0, roof_keys),
+                              ("bottom_shear_coefficient", bottom_thickness > 0.0, "popbal.bottom_layer_factor"),
                               ("bottom_drain_coefficient", bottom_thickness > 0.0, "popbal.bottom_layer_factor")):
         if getattr(p, key) is not None and not layer:
             raise CaseError(f"popbal.{key} = {getattr(p, key)!r}: sets a layer this case does not have; allowed only "

@@ -725,6 +725,56 @@ def test_channel_kernel_from_the_collisions_by_height_of_a_run(tmp_path):
         channel_kernel_from_collisions(["a"], tmp_path, values)
 
 
+def test_floor_shear_is_the_bottom_bands_slag_shear_over_popbals_plume_turning_over_its_layer(tmp_path):
+    """floor_shear_from_collisions: the full run's slag shear rate at the bottom band's droplets (under the inlet and
+    elsewhere, weighted by the droplet volume each holds) over popbal's bottom layer's u_s t / h_b. At the inlet form
+    with factor 0.5 and bottom_layer_factor 1, h_b = R_c = half the inlet radius and u_s is the steady plume law
+    sqrt(c_ch Q drho g / (pi mu)) (transport factor 1). A band without a shear rate, and values without a bottom
+    layer, are refused by name."""
+    import shutil
+    from pathlib import Path
+
+    from analysis.band_efficiency import COLLISIONS_FILE, COLLISIONS_UNITS
+    from analysis.calibration.zones import floor_shear_from_collisions
+    from settler.cases import load_case
+    from settler.output import units_line
+
+    root = Path(__file__).resolve().parents[1]
+    folder = tmp_path / "a"
+    folder.mkdir()
+    shutil.copy(root / "data" / "reference" / "demo" / "case.toml", folder / "case.toml")
+    rows = pd.DataFrame({column: [1.0] * 3 for column in COLLISIONS_UNITS})
+    rows["z"] = [0.05, 0.0125, 0.0875]  # unsorted: the floor's band is the second row
+    rows["shear_rate_under_inlet"] = [1e3, 3.0, 1e3]
+    rows["shear_rate_elsewhere"] = [1e3, 0.5, 1e3]
+    rows["volume_under_inlet"] = [1.0, 3e-7, 1.0]
+    rows["volume_elsewhere"] = [1.0, 1e-7, 1.0]
+    header = (units_line(COLLISIONS_UNITS)
+              + "# window: 10.0 20.0 s; cell: 0.005 m; rate_scatter: 0.01; snapshots: 10.0 20.0\n")
+    (folder / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
+    values = {"popbal.channel_radius_form": "inlet", "popbal.channel_radius_factor": 0.5,
+              "popbal.channel_coefficient": 0.4, "popbal.confinement": False, "popbal.bottom_layer_factor": 1.0}
+    got = floor_shear_from_collisions(["a"], tmp_path, values)
+    case = load_case(folder / "case.toml")
+    q = case.feed.mass_rate / case.matte.density
+    u_s = math.sqrt(0.4 * q * (case.matte.density - case.slag.density) * 9.80665 / (math.pi * case.slag_viscosity))
+    own = u_s / (0.25 * case.geometry.inlet_diameter)
+    rate = (3.0 * 3e-7 + 0.5 * 1e-7) / 4e-7
+    assert got["per_run"]["a"]["shear_rate"] == pytest.approx(rate, rel=1e-12)
+    assert got["per_run"]["a"]["popbal_shear_rate"] == pytest.approx(own, rel=1e-6)
+    assert got["value"] == pytest.approx(rate / own, rel=1e-6)
+
+    with pytest.raises(ValueError, match="no bottom layer in this case"):
+        floor_shear_from_collisions(["a"], tmp_path, {k: v for k, v in values.items() if "bottom" not in k})
+    rows["shear_rate_under_inlet"] = [1e3, float("nan"), 1e3]
+    rows["shear_rate_elsewhere"] = [1e3, float("nan"), 1e3]
+    (folder / COLLISIONS_FILE).write_text(header + rows.to_csv(index=False))
+    with pytest.raises(ValueError, match="a/collisions_by_height.csv: no slag shear rate at droplets in the bottom"):
+        floor_shear_from_collisions(["a"], tmp_path, values)
+    with pytest.raises(ValueError, match="at least one stored run"):
+        floor_shear_from_collisions([], tmp_path, values)
+
+
 @pytest.mark.parametrize("closures", ["zones_floor", "zones_line", "zones_drain"])
 def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_the_coalescing_whole_runs(
         tmp_path, monkeypatch, closures):

@@ -337,7 +337,37 @@ def test_channel_efficiency_without_a_channel_is_refused():
                               "popbal.channel_collision_efficiency=2"])
 
 
-@pytest.mark.parametrize("key", ["roof_collision_efficiency", "roof_shear_coefficient", "bottom_drain_coefficient"])
+def _early_bottom_merges(extra):
+    """The bottom layer's coalescence events after 5 s of the demo's feed (coalescence on, reaction off): the first
+    droplets have just reached the floor, so that merging has not yet changed what the layer holds."""
+    model = popbal.setup("demo", LAYERS + ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
+                                           "reaction.enabled=false", "popbal.collision_efficiency=1",
+                                           "popbal.shear_coefficient=0.5", "popbal.end_time=5",
+                                           "popbal.output_interval=5"] + extra)
+    result = popbal.run(model, progress=False)
+    return float(result.arrays["merges"][-1][BOTTOM].sum()), result
+
+
+def test_bottom_shear_coefficient_scales_the_bottom_layers_shear_alone():
+    """popbal.bottom_shear_coefficient sets the bottom layer's G = c u_c t / h_b: absent it is shear_coefficient (the
+    same run bit for bit); the layer's early shear collisions add linearly in c (2 %), and the channel's merges do
+    not move (1e-9: nothing returns from the floor)."""
+    base, reference = _early_bottom_merges([])
+    same, result = _early_bottom_merges(["popbal.bottom_shear_coefficient=0.5"])
+    assert np.array_equal(result.arrays["number_density"], reference.arrays["number_density"]) and same == base
+    no_shear, _ = _early_bottom_merges(["popbal.bottom_shear_coefficient=0"])
+    one, _ = _early_bottom_merges(["popbal.bottom_shear_coefficient=1"])
+    two, result = _early_bottom_merges(["popbal.bottom_shear_coefficient=2"])
+    print(f"\nbottom merges at 5 s, bottom shear coefficient 0 / 0.5 (absent) / 1 / 2: {no_shear:.4g} / {base:.4g} / "
+          f"{one:.4g} / {two:.4g}")
+    assert no_shear > 0.0 and one > 1.5 * no_shear  # the shear's share is not negligible, so the next check tests it
+    assert (two - no_shear) / (one - no_shear) == pytest.approx(2.0, rel=0.02)
+    assert result.arrays["merges"][-1][CHANNEL].sum() == pytest.approx(reference.arrays["merges"][-1][CHANNEL].sum(),
+                                                                         rel=1e-9)
+
+
+@pytest.mark.parametrize("key", ["roof_collision_efficiency", "roof_shear_coefficient", "bottom_drain_coefficient",
+                                 "bottom_shear_coefficient"])
 def test_layer_kernel_keys_without_their_layer_are_refused(key):
     with pytest.raises(CaseError, match=f"popbal.{key} = 2.0: sets a layer this case does not have"):
         popbal.setup("demo", [f"popbal.{key}=2"])

@@ -306,6 +306,52 @@ def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict
             "runs": list(runs)}
 
 
+def floor_shear_from_collisions(runs, reference_dir: str | Path, values: dict | None = None) -> dict:
+    """The bottom layer's shear coefficient c_b [-] as popbal's bottom layer applies it (G = c_b u_s t / h_b,
+    ``popbal.bottom_shear_coefficient``), from each full run's zone diagnostics (``collisions_by_height.csv``, over
+    the steady window it was stored with; :mod:`analysis.band_efficiency`) in the bottom band (the floor's):
+
+    - the full run's G: the slag's shear rate at the band's droplets under the inlet and elsewhere, weighted by the
+      droplet volume each holds (popbal's layer spans the whole floor);
+    - popbal's G at c_b = 1 in the run's case at the [popbal] ``values`` (dotted keys, its calibration layer set
+      aside; they must give it a bottom layer): u_s t / h_b, the plume's droplet velocity over the layer's thickness
+      (:func:`popbal.model.build`);
+    - c_b = their ratio.
+
+    c_b the geometric mean over the runs; per run in "per_run" (shear_rate, popbal_shear_rate, coefficient). A run
+    without the table, a shear rate in its bottom band or a bottom layer at ``values`` is refused by name, as is an
+    empty list of runs."""
+    import popbal
+    from settler.cases import NO_CALIBRATION, load_case
+
+    if not runs:
+        raise ValueError("the bottom layer's shear needs at least one stored run with its collisions by height; none "
+                         "was given")
+    per_run = {}
+    for run in runs:
+        folder = Path(reference_dir) / run
+        path = folder / "collisions_by_height.csv"
+        table, _ = _collisions_with_shear(folder, "the bottom layer's shear")
+        floor = table.iloc[int(np.argmin(table["z"].to_numpy()))]
+        rates = np.array([floor["shear_rate_under_inlet"], floor["shear_rate_elsewhere"]], dtype=float)
+        held = np.array([floor["volume_under_inlet"], floor["volume_elsewhere"]], dtype=float)
+        known = np.isfinite(rates) & (held > 0.0)
+        if not known.any():
+            raise ValueError(f"{path}: no slag shear rate at droplets in the bottom band; the bottom layer's shear "
+                             "needs it")
+        rate = float(np.average(rates[known], weights=held[known]))
+        case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION, **(values or {})})
+        model = popbal.setup(case)
+        if not model.bottom:
+            raise ValueError(f"{folder}: popbal has no bottom layer in this case at the values given (set "
+                             "popbal.bottom_layer_factor); the bottom layer's shear is measured against it")
+        p = model.parameters
+        own = p["plume_velocity"] * p["transport_factor"] / model.bottom_thickness
+        per_run[run] = {"shear_rate": rate, "popbal_shear_rate": own, "coefficient": rate / own}
+    value = float(np.exp(np.mean(np.log([v["coefficient"] for v in per_run.values()]))))
+    return {"value": value, "per_run": per_run, "runs": list(runs)}
+
+
 def spread_share_from_groups(runs, reference_dir: str | Path, fixed: dict) -> dict:
     """The spread plume's slag core over the column, s = R* / R [-] (R* the equivalent core at the axis speed,
     :func:`analysis.groups.stored_measured_groups`; R the column's equivalent radius): the geometric mean over the
