@@ -243,6 +243,8 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
         work.velocities[zone] -= model.return_velocity  # the slag rises at u_up outside the plume
     if zone == ROOF:  # the slag feed flows through the roof at its inlet velocity, not spread over the box
         work.velocities[zone, -1] += model.roof_slag_velocity - model.downflow[-1]
+        if p["roof_cloud_drainage"]:  # the layer drains as one cloud at u_L + w, every size alike
+            work.velocities[zone, -1] = work.collective[zone, -1] + model.roof_slag_velocity
     if zone == BOTTOM:  # the plume turns over the layer's thickness: G = bottom_shear_coefficient u_c t / h_b
         work.shear[zone] = 0.0
         work.shear[zone, 0] = p["bottom_shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \
@@ -502,7 +504,8 @@ def _bottom_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
 def _roof_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, dt: float, feeding: bool) -> None:
     """The roof layer over dt (popbal.closures): the channel's share of the feed enters its one (top) cell, and
     section k drains out of its bottom at its velocity v_k (the layer's u_L plus the droplets' own hindered
-    settling; properties at the step start): :func:`_layer_step`. What drained goes to work.roof_out [absolute
+    settling, or u_L plus the slag's w alone with ``roof_drainage = "cloud"``; properties at the step start):
+    :func:`_layer_step`. What drained goes to work.roof_out [absolute
     amounts], which the channel's top cell receives in the same step."""
     volume = model.zone_area[ROOF] * model.cell_height
     inflow = work.roof_in

@@ -259,6 +259,8 @@ def build(case: Case) -> Model:
         else p.roof_collision_efficiency,
         "channel_efficiency": p.collision_efficiency if p.channel_collision_efficiency is None
         else p.channel_collision_efficiency,
+        # the roof layer's droplets leave it at u_L (+ w) alone ('cloud') or plus their own settling ('sizes')
+        "roof_cloud_drainage": p.roof_drainage == "cloud",
         "roof_shear_coefficient": p.shear_coefficient if p.roof_shear_coefficient is None
         else p.roof_shear_coefficient,
         "bottom_shear_coefficient": p.shear_coefficient if p.bottom_shear_coefficient is None
@@ -286,7 +288,8 @@ def build(case: Case) -> Model:
                         "of a channel zone this case does not have; allowed only with popbal.channel_radius_factor > 0 "
                         "(or leave it out)")
     roof_keys = "popbal.roof_layer_coefficient and popbal.roof_thickness (or popbal.roof_drainage_ratio)"
-    for key, layer, needs in (("roof_collision_efficiency", roof_volume > 0.0, roof_keys),
+    for key, layer, needs in (("roof_drainage", roof_volume > 0.0, roof_keys),
+                              ("roof_collision_efficiency", roof_volume > 0.0, roof_keys),
                               ("roof_shear_coefficient", roof_volume > 0.0, roof_keys),
                               ("bottom_shear_coefficient", bottom_thickness > 0.0, "popbal.bottom_layer_factor"),
                               ("bottom_drain_coefficient", bottom_thickness > 0.0, "popbal.bottom_layer_factor")):

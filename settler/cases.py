@@ -270,6 +270,11 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                             "sqrt(mu k U_s (k U_s - w) / (c_L drho g j)) thick, w the slag's velocity "
                                             "through the inlet); absent: 'fixed'.",
                                      choices=("fixed", "drainage"), optional=True),
+        "roof_drainage": Field(S, "", "How the roof layer's droplets leave it (popbal.closures): 'sizes' (each "
+                                      "section at the layer's cloud velocity u_L plus its own hindered settling) or "
+                                      "'cloud' (every section at u_L plus the slag's velocity through the layer, as "
+                                      "the roof law j = phi (u_L + w) and its measured c_L and k take it); absent: "
+                                      "'sizes'.", choices=("sizes", "cloud"), optional=True),
         "roof_drainage_ratio": Field(F, "-", "k of roof_thickness_form = 'drainage': the roof layer's drainage "
                                              "velocity over U_s, 2.3-2.8 in the resolved reference runs "
                                              "(docs/guide/reduced-model.md).", 0.0, exclusive_minimum=True,

@@ -65,6 +65,29 @@ def test_roof_layer_holds_its_closed_form_volume_fraction(steady):
         == pytest.approx(C_L, rel=1e-12)
 
 
+def test_roof_drained_as_a_cloud_holds_the_roof_laws_inventory(steady):
+    """popbal.roof_drainage = 'cloud': every section leaves the roof at the layer's cloud velocity u_L alone (the
+    demo has no slag feed through its roof), so the steady layer holds exactly the roof law's matte per area,
+    I = roof_inventory(j, drho, mu, c_L) (j = phi u_L with u_L = c_L phi drho g delta^2 / mu), which is what c_L is
+    measured from; 'sizes' (the default: the same run bit for bit) adds the droplets' own settling and holds less."""
+    model, sizes = steady
+    case = model.case
+    cloud_model = popbal.setup("demo", SINGLE_SIZE + LAYERS + ["popbal.end_time=200", "popbal.output_interval=10",
+                                                               "popbal.roof_drainage=cloud"])
+    cloud = popbal.run(cloud_model, progress=False)
+    j = case.feed.mass_rate / case.matte.density / (math.pi * model.inlet_radius**2)
+    law = roof_inventory(j, case.matte.density - case.slag.density, model.viscosity, C_L)
+    got, own = _volume_fraction(cloud, ROOF, -1) * DELTA, _volume_fraction(sizes, ROOF, -1) * DELTA
+    print(f"\nroof matte per area: drained as a cloud {got * 1e6:.3f} um against the law's {law * 1e6:.3f} um; size by "
+          f"size {own * 1e6:.3f} um")
+    assert got == pytest.approx(law, rel=1e-4)
+    assert own < 0.95 * law  # the droplets' own settling matters here, so the check above tests the switch
+    assert np.abs(cloud.timeseries["mass_balance_error"]).max() < 1e-10
+    same = popbal.run(popbal.setup("demo", SINGLE_SIZE + LAYERS + ["popbal.end_time=200", "popbal.output_interval=10",
+                                                                   "popbal.roof_drainage=sizes"]), progress=False)
+    assert np.array_equal(same.arrays["number_density"], sizes.arrays["number_density"])
+
+
 def _assert_mass_kept_and_the_feed_settles(result, after=300.0):
     """The matte balance holds to round-off over the run, and from ``after`` [s] on the matte settles at the rate it
     is fed (the layers and the return flow at steady state)."""
@@ -371,6 +394,11 @@ def test_bottom_shear_coefficient_scales_the_bottom_layers_shear_alone():
 def test_layer_kernel_keys_without_their_layer_are_refused(key):
     with pytest.raises(CaseError, match=f"popbal.{key} = 2.0: sets a layer this case does not have"):
         popbal.setup("demo", [f"popbal.{key}=2"])
+
+
+def test_roof_drainage_without_a_roof_is_refused():
+    with pytest.raises(CaseError, match="popbal.roof_drainage = 'cloud': sets a layer this case does not have"):
+        popbal.setup("demo", ["popbal.roof_drainage=cloud"])
 
 
 # --- the bottom layer's lift into the return flow (popbal.bottom_lift_share, bottom_lift_velocity_ratio): resolved,
