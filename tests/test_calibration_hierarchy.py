@@ -601,6 +601,13 @@ def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
     share = delta * phi * area / volume
     assert fixed["efficiency"] == pytest.approx(merges / ((gravitational + shear) * share**2 * h_b / 0.01), rel=1e-12)
     assert fixed["shear_coefficient"] == pytest.approx(rate * 0.01 / (j * 0.01 / (delta * phi)), rel=1e-12)
+    # with popbal's hindered relative velocities: C_g x (1 - phi_L)^n at phi_L = I / delta_p, the shear part as it was
+    hindered = roof_kernel_from_collisions(["a"], tmp_path, thickness=0.01, hindered_exponent=4.65)
+    h = (1.0 - delta * phi / 0.01) ** 4.65
+    assert hindered["per_run"]["a"]["hindrance"] == pytest.approx(h, rel=1e-12) and 0.4 < h < 0.6
+    assert hindered["efficiency"] == pytest.approx(merges / ((h * gravitational + shear) * share**2 * h_b / 0.01),
+                                                   rel=1e-12)
+    assert hindered["shear_coefficient"] == fixed["shear_coefficient"]
 
     old = pd.read_csv(tmp_path / "b" / COLLISIONS_FILE, comment="#").drop(columns=["mixed_shear_under_inlet"])
     text = (tmp_path / "b" / COLLISIONS_FILE).read_text().splitlines(keepends=True)

@@ -177,7 +177,8 @@ def law_roof_thickness(case_file, fixed: dict) -> float:
     return roof_thickness(load_case(case_file, {"case.calibration": NO_CALIBRATION, **keys}))
 
 
-def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: float | dict | None = None) -> dict:
+def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: float | dict | None = None,
+                                hindered_exponent: float | None = None) -> dict:
     """The roof layer's own kernel [-] as popbal's roof applies it, from each full run's zone diagnostics over the
     window of its collisions by height (``collisions_by_height.csv``, measured over the steady window when the run
     was stored; :mod:`analysis.band_efficiency`), in the top band under the inlet (the disk of area A):
@@ -197,12 +198,19 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
       slag feed's velocity through it; popbal.closures): popbal shears its roof at G = roof_shear_coefficient u_L /
       delta.
 
+    With ``hindered_exponent`` n the gravitational collisions are counted as popbal's roof counts them: the table's
+    are at the droplets' terminal velocities (:mod:`analysis.band_efficiency`), popbal's kernel takes their hindered
+    ones, so C_g is multiplied by (1 - phi_L)^n at the layer's volume fraction phi_L = I / delta (per run in
+    "hindrance"); without it (None) E_L holds against terminal velocities, and popbal's roof, which holds phi_L,
+    merges (1 - phi_L)^n of what the run's top band does (0.765 in simple at zones_core's values).
+
     Each the geometric mean over the runs; per run in "per_run". A run without the table, without the well-mixed
     shear columns, without merges or shear in its top band, or whose roof the slag alone would carry is refused by
     name, and so is an empty list of runs."""
     from analysis.band_efficiency import COLLISIONS_FILE
     from popbal.model import roof_slag_velocity
     from settler.cases import load_case
+    from settler.physics import richardson_zaki_factor
 
     if not runs:
         raise ValueError("the roof kernel needs at least one run with coalescence and a roof among the whole level's "
@@ -225,7 +233,10 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
         area = math.pi * (0.5 * case.geometry.inlet_diameter) ** 2
         band = case.geometry.height / len(table)
         share = min(inventory * area / float(top["volume_under_inlet"]), 1.0)
-        collisions = float(top["mixed_under_inlet"] + top["mixed_shear_under_inlet"]) * share**2 * band / delta
+        hindrance = 1.0 if hindered_exponent is None else richardson_zaki_factor(min(inventory / delta, 1.0),
+                                                                                 hindered_exponent)
+        collisions = float(hindrance * top["mixed_under_inlet"] + top["mixed_shear_under_inlet"]) * share**2 \
+            * band / delta
         flux = case.feed.mass_rate / case.matte.density / area
         slag = roof_slag_velocity(case, roof=True, horizontal=case.popbal.slag_flow == "horizontal")
         drainage = flux * delta / inventory - slag
@@ -235,13 +246,13 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
         rate = float(top["shear_rate_under_inlet"])
         per_run[run] = {"efficiency": float(top["merges_under_inlet"]) / collisions,
                         "shear_coefficient": rate * delta / drainage, "shear_rate": rate, "thickness": own,
-                        "share": share, "drainage_velocity": drainage}
+                        "share": share, "drainage_velocity": drainage, "hindrance": hindrance}
 
     def mean(key):
         return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
 
     return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
-            "runs": list(runs), "thickness": thickness}
+            "runs": list(runs), "thickness": thickness, "hindered_exponent": hindered_exponent}
 
 
 def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict | None = None) -> dict:
