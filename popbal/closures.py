@@ -225,13 +225,14 @@ settle hindered (the demo and deep's feed in its 50 mm column), pushed by the pl
 popbal's plume velocity, so the bottom layer's droplets may reach the floor at U_h + bottom_drain_coefficient x
 the plume's droplet velocity (transport x u_s); with coalescence they cross 3-13 times faster, mostly by growing.
 All three are exploratory closures, not yet calibrated (no stored layer sets them).
-The roof's drainage (``roof_drainage``; absent: "sizes"). c_L and k are measured from the full runs' roof layers
-as j = phi (u_L + w), the layer draining as one cloud; popbal's roof by default lets each section leave at u_L plus
-its own hindered settling, so that it holds less than the law (0.60-0.77 of the coalescing training runs' roof
-layers, where merging grows fast droplets) and the roof kernel measured at the law's inventory merges less than the
-runs' roofs. ``roof_drainage = "cloud"`` drains every section at u_L + w: the layer then holds the law's inventory
-(0.86-0.97 of those runs' layers). No stored layer sets it (2026-12-07, docs/guide/reduced-model.md).
-The floor's shear (``bottom_shear_coefficient`` c_b; absent: shear_coefficient): G = c_b u_c t / h_b. The full runs'
+The roof's drainage (``roof_drainage``; absent: "sizes"). c_L and k are measured from the full runs' roof layers as j
+= phi (u_L + w), the layer draining as one cloud; popbal's roof by default lets each section leave at u_L plus its own
+hindered settling, so that it holds less than the law (0.60-0.77 of the coalescing training runs' roof layers, where
+merging grows fast droplets) and the roof kernel measured at the law's inventory merges less than the runs' roofs.
+``roof_drainage = "cloud"`` drains every section at u_L + w (each still collides at its own velocity): the layer then
+holds the law's inventory (0.77-0.97 of those runs' layers). No stored layer sets it (2026-12-07,
+docs/guide/reduced-model.md).
+The floor's shear (``bottom_shear_coefficient`` c_b; absent: shear_coefficient): G = c_b u_s t / h_b. The full runs'
 slag turns far more gently over the floor than the plume's speed over the layer's thickness says: their slag's shear
 rate at the bottom band's droplets is 0.11-0.21 of popbal's G at c_b = 1 in the nine coalescing training runs of the
 second registration (zones_core's values; 0.5-5.6 /s against 2.9-26 /s), geometric mean 0.157

@@ -243,9 +243,7 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
         work.velocities[zone] -= model.return_velocity  # the slag rises at u_up outside the plume
     if zone == ROOF:  # the slag feed flows through the roof at its inlet velocity, not spread over the box
         work.velocities[zone, -1] += model.roof_slag_velocity - model.downflow[-1]
-        if p["roof_cloud_drainage"]:  # the layer drains as one cloud at u_L + w, every size alike
-            work.velocities[zone, -1] = work.collective[zone, -1] + model.roof_slag_velocity
-    if zone == BOTTOM:  # the plume turns over the layer's thickness: G = bottom_shear_coefficient u_c t / h_b
+    if zone == BOTTOM:  # the plume turns over the layer's thickness: G = bottom_shear_coefficient u_s t / h_b
         work.shear[zone] = 0.0
         work.shear[zone, 0] = p["bottom_shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \
             / model.bottom_thickness
@@ -514,7 +512,11 @@ def _roof_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, dt
         rate = model.feed_multiplier * model.zone_feed_fraction[CHANNEL] * model.feed_number_rate
         inflow[NUMBER] = rate / volume
         books.fed[NUMBER] += dt * rate
-    velocity = np.maximum(work.velocities[ROOF, -1], 0.0)
+    if model.parameters["roof_cloud_drainage"]:  # the layer drains as one cloud at u_L + w, every size alike (its
+        # droplets still collide at their own velocities: work.velocities is left as it is)
+        velocity = np.full(work.velocities.shape[-1], max(work.collective[ROOF, -1] + model.roof_slag_velocity, 0.0))
+    else:
+        velocity = np.maximum(work.velocities[ROOF, -1], 0.0)
     work.roof_out[:] = _layer_step(content[ROOF, -1], inflow, velocity, model.roof_thickness, dt) * volume
 
 

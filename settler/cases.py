@@ -322,7 +322,7 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "roof_shear_coefficient": Field(F, "-", "The roof layer's shear rate G in units of u_L / delta, the layer's "
                                                 "drainage velocity over its thickness (popbal.closures); absent: "
                                                 "shear_coefficient.", 0.0, optional=True),
-        "bottom_shear_coefficient": Field(F, "-", "The bottom layer's shear rate G in units of u_c t / h_b, the "
+        "bottom_shear_coefficient": Field(F, "-", "The bottom layer's shear rate G in units of u_s t / h_b, the "
                                                   "plume's droplet velocity over the layer's thickness "
                                                   "(popbal.closures; measured by analysis.calibration.zones."
                                                   "floor_shear_from_collisions); absent: shear_coefficient.", 0.0,

@@ -315,6 +315,12 @@ def test_roof_kernel_keys_scale_the_roof_layers_merges_alone():
     assert np.array_equal(result.arrays["number_density"], reference.arrays["number_density"]) and same == base
     doubled, result = _early_roof_merges(["popbal.roof_collision_efficiency=2"])
     assert base > 0.0 and doubled / base == pytest.approx(2.0, rel=0.02)  # both kernels scale with it
+    # drained as a cloud, the roof's droplets still collide at their own velocities (gravitational merges alone, no
+    # roof shear): early it merges at least as much as the default roof, which loses a little more to its droplets'
+    # own settling, and not 10 % more
+    cloud, _ = _early_roof_merges(["popbal.roof_drainage=cloud", "popbal.roof_shear_coefficient=0"])
+    sizes, _ = _early_roof_merges(["popbal.roof_shear_coefficient=0"])
+    assert 0.0 < sizes <= cloud < 1.1 * sizes
     # the channel's merges do not see the roof's efficiency beyond what the roof sends it (none merged yet)
     assert result.arrays["merges"][-1][CHANNEL].sum() == pytest.approx(reference.arrays["merges"][-1][CHANNEL].sum(),
                                                                          rel=0.02)
@@ -372,7 +378,7 @@ def _early_bottom_merges(extra):
 
 
 def test_bottom_shear_coefficient_scales_the_bottom_layers_shear_alone():
-    """popbal.bottom_shear_coefficient sets the bottom layer's G = c u_c t / h_b: absent it is shear_coefficient (the
+    """popbal.bottom_shear_coefficient sets the bottom layer's G = c u_s t / h_b: absent it is shear_coefficient (the
     same run bit for bit); the layer's early shear collisions add linearly in c (2 %), and the channel's merges do
     not move (1e-9: nothing returns from the floor)."""
     base, reference = _early_bottom_merges([])
