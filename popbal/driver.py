@@ -245,8 +245,7 @@ def _properties(model: Model, content: np.ndarray, work: _Work, zone: int):
         work.velocities[zone, -1] += model.roof_slag_velocity - model.downflow[-1]
     if zone == BOTTOM:  # the plume turns over the layer's thickness: G = bottom_shear_coefficient u_s t / h_b
         work.shear[zone] = 0.0
-        work.shear[zone, 0] = p["bottom_shear_coefficient"] * p["plume_velocity"] * p["transport_factor"] \
-            / model.bottom_thickness
+        work.shear[zone, 0] = p["bottom_shear_coefficient"] * model.bottom_turning_rate
         # the plume's discharge drives the layer's droplets into the floor (bottom_drain_coefficient; 0: none)
         work.velocities[zone, 0] += p["bottom_push"]
     elif zone != OUTER and model.channel_radius > 0.0:

@@ -115,6 +115,15 @@ class Model:
         return self.zone_area[BOTTOM] > 0.0
 
     @property
+    def bottom_turning_rate(self) -> float:
+        """u_s t / h_b [1/s]: the plume's droplet velocity over the bottom layer's thickness, the rate at which the
+        plume turns over it; the layer's shear rate is bottom_shear_coefficient times it (popbal.closures). NaN
+        without a bottom layer."""
+        if not self.bottom:
+            return math.nan
+        return self.parameters["plume_velocity"] * self.parameters["transport_factor"] / self.bottom_thickness
+
+    @property
     def name(self) -> str:
         return self.case.case.name
 

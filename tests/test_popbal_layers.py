@@ -297,15 +297,21 @@ def test_drained_bottom_layer_holds_its_closed_form_volume_fraction(drained):
     assert np.abs(result.timeseries["mass_balance_error"]).max() < 1e-10
 
 
-def _early_roof_merges(extra):
-    """The roof layer's coalescence events after 0.3 s of the demo's feed (coalescence on, reaction off): early, so
-    that merging has not yet changed what the layer holds and its events grow linearly with the kernel."""
-    model = popbal.setup("demo", LAYERS[:2] + ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
-                                               "reaction.enabled=false", "popbal.collision_efficiency=1",
-                                               "popbal.shear_coefficient=0.5", "popbal.end_time=0.3",
-                                               "popbal.output_interval=0.3"] + extra)
+def _early_layer_merges(zone, layers, end_time, extra):
+    """A layer's (``zone``) coalescence events after ``end_time`` [s] of the demo's feed with the ``layers`` keys
+    (coalescence on, reaction off), and the result: early, so that merging has not yet changed what the layer holds
+    and its events grow linearly with the kernel."""
+    model = popbal.setup("demo", layers + ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
+                                           "reaction.enabled=false", "popbal.collision_efficiency=1",
+                                           "popbal.shear_coefficient=0.5", f"popbal.end_time={end_time}",
+                                           f"popbal.output_interval={end_time}"] + extra)
     result = popbal.run(model, progress=False)
-    return float(result.arrays["merges"][-1][ROOF].sum()), result
+    return float(result.arrays["merges"][-1][zone].sum()), result
+
+
+def _early_roof_merges(extra):
+    """The roof layer's events after 0.3 s (no bottom layer)."""
+    return _early_layer_merges(ROOF, LAYERS[:2], 0.3, extra)
 
 
 def test_roof_kernel_keys_scale_the_roof_layers_merges_alone():
@@ -367,14 +373,8 @@ def test_channel_efficiency_without_a_channel_is_refused():
 
 
 def _early_bottom_merges(extra):
-    """The bottom layer's coalescence events after 5 s of the demo's feed (coalescence on, reaction off): the first
-    droplets have just reached the floor, so that merging has not yet changed what the layer holds."""
-    model = popbal.setup("demo", LAYERS + ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
-                                           "reaction.enabled=false", "popbal.collision_efficiency=1",
-                                           "popbal.shear_coefficient=0.5", "popbal.end_time=5",
-                                           "popbal.output_interval=5"] + extra)
-    result = popbal.run(model, progress=False)
-    return float(result.arrays["merges"][-1][BOTTOM].sum()), result
+    """The bottom layer's events after 5 s: the first droplets have just reached the floor."""
+    return _early_layer_merges(BOTTOM, LAYERS, 5, extra)
 
 
 def test_bottom_shear_coefficient_scales_the_bottom_layers_shear_alone():

@@ -20,6 +20,11 @@ ROOF_RESOLVED_CELL = 3.4e-3
 CORE_BAND = (0.3, 0.7)
 
 
+def _geometric_mean(values) -> float:
+    """exp(mean(ln x)) of the positive ``values`` [their unit]: how every per-run measure here is pooled."""
+    return float(np.exp(np.mean(np.log(list(values)))))
+
+
 def _core_band(folder: Path, table: str) -> pd.DataFrame:
     """The rows of a stored run's ``table`` (zone_profile.csv or channel_profile.csv) in the :data:`CORE_BAND` of the
     height over the run's steady window."""
@@ -145,9 +150,9 @@ def roof_from_zones(runs, reference_dir: str | Path) -> dict:
                              f"thick) is carried by the slag feed alone ({slag:.3g} m/s through the inlet against "
                              f"the matte's {flux:.3g} m/s): no cloud drainage to measure c_L from; leave the run out "
                              "of the level or use a closure set without a roof layer")
-    coefficient = float(np.exp(np.mean(np.log(list(per_run.values())))))
+    coefficient = _geometric_mean(per_run.values())
     return {"coefficient": coefficient, "thickness": float(np.mean(thickness)), "per_run": per_run, "runs": list(runs),
-            "drainage_ratio": float(np.exp(np.mean(np.log(list(drainage.values()))))) if drainage else math.nan,
+            "drainage_ratio": _geometric_mean(drainage.values()) if drainage else math.nan,
             "drainage_per_run": drainage}
 
 
@@ -249,7 +254,7 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
                         "share": share, "drainage_velocity": drainage, "hindrance": hindrance}
 
     def mean(key):
-        return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
+        return _geometric_mean(v[key] for v in per_run.values())
 
     return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
             "runs": list(runs), "thickness": thickness, "hindered_exponent": hindered_exponent}
@@ -311,7 +316,7 @@ def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict
                         "cell_efficiency": merges / cell}
 
     def mean(key):
-        return float(np.exp(np.mean(np.log([v[key] for v in per_run.values()]))))
+        return _geometric_mean(v[key] for v in per_run.values())
 
     return {"efficiency": mean("efficiency"), "shear_coefficient": mean("shear_coefficient"), "per_run": per_run,
             "runs": list(runs)}
@@ -333,6 +338,7 @@ def floor_shear_from_collisions(runs, reference_dir: str | Path, values: dict | 
     without the table, a shear rate in its bottom band or a bottom layer at ``values`` is refused by name, as is an
     empty list of runs."""
     import popbal
+    from analysis.band_efficiency import COLLISIONS_FILE
     from settler.cases import NO_CALIBRATION, load_case
 
     if not runs:
@@ -341,7 +347,7 @@ def floor_shear_from_collisions(runs, reference_dir: str | Path, values: dict | 
     per_run = {}
     for run in runs:
         folder = Path(reference_dir) / run
-        path = folder / "collisions_by_height.csv"
+        path = folder / COLLISIONS_FILE
         table, _ = _collisions_with_shear(folder, "the bottom layer's shear")
         floor = table.iloc[int(np.argmin(table["z"].to_numpy()))]
         rates = np.array([floor["shear_rate_under_inlet"], floor["shear_rate_elsewhere"]], dtype=float)
@@ -356,10 +362,9 @@ def floor_shear_from_collisions(runs, reference_dir: str | Path, values: dict | 
         if not model.bottom:
             raise ValueError(f"{folder}: popbal has no bottom layer in this case at the values given (set "
                              "popbal.bottom_layer_factor); the bottom layer's shear is measured against it")
-        p = model.parameters
-        own = p["plume_velocity"] * p["transport_factor"] / model.bottom_thickness
+        own = model.bottom_turning_rate
         per_run[run] = {"shear_rate": rate, "popbal_shear_rate": own, "coefficient": rate / own}
-    value = float(np.exp(np.mean(np.log([v["coefficient"] for v in per_run.values()]))))
+    value = _geometric_mean(v["coefficient"] for v in per_run.values())
     return {"value": value, "per_run": per_run, "runs": list(runs)}
 
 
