@@ -65,3 +65,22 @@ def test_given_its_measured_core_and_the_roofs_drainage_law_popbal_carries_the_r
         assert 7e-3 < core < 12e-3, (run, core)  # a compact core
         error = probe([run], {**base, "popbal.channel_radius": core}, registry, closures="zones_drain")[run]
         assert abs(error["droplet_count"]) < 0.12 and abs(error["channel_velocity"]) < 0.16, (run, error)
+
+
+def test_a_coalescence_off_run_is_probed_without_the_bottom_layers_keys():
+    """The transport level's coalescence-off runs are probed without a bottom layer (their floors fill), and popbal
+    refuses a key that needs one there: the probe leaves the layer and each such key out for them (the floor's shear
+    among them, which it once passed on, so that the probe of the default runs stopped at the first of them)."""
+    from analysis.calibration.probe import BOTTOM_KEYS
+    from popbal.model import setup
+    from settler.cases import CaseError, load_case
+
+    for key in BOTTOM_KEYS[1:]:  # after the layer's own factor, each key is one popbal refuses without the layer
+        with pytest.raises(CaseError, match=key.split(".")[1]):
+            setup(load_case("data/reference/demo_no_coalescence_fine/case.toml",
+                            {"case.calibration": "none", key: 0.5, "popbal.end_time": 1.0}))
+    overrides = {"popbal.plume_core_radius": 9.47e-3, "popbal.channel_radius_factor": 0.505,  # zones_core's, rounded
+                 "popbal.bottom_layer_factor": 0.35, "popbal.bottom_shear_coefficient": 0.157}
+    errors = probe(["demo_no_coalescence_fine"], overrides, load_registry("data/calibration/holdouts.toml"),
+                   closures="zones_core")
+    assert set(errors) == {"demo_no_coalescence_fine"}
