@@ -84,3 +84,54 @@ def test_a_coalescence_off_run_is_probed_without_the_bottom_layers_keys():
     errors = probe(["demo_no_coalescence_fine"], overrides, load_registry("data/calibration/holdouts.toml"),
                    closures="zones_core")
     assert set(errors) == {"demo_no_coalescence_fine"}
+
+
+ZONES_CORE = {"popbal.plume_core_radius": 0.009473349689498752, "popbal.channel_radius_factor": 0.5048478001816454,
+              "popbal.bottom_layer_factor": 0.3468513234083059}  # data/calibration/zones_core.toml's values
+
+
+def test_the_band_table_books_each_models_matte_and_merges_in_its_bands():
+    """zone_bands (probe --bands) against independent books: the full run's loads by band (plume_zones.csv, split by
+    radius) times the band height are the band volumes that collisions_by_height.csv splits by the inlet's disk
+    (to 1e-3), its merges per second times the window are the time series' merges over the window (exactly), and
+    popbal's merges summed over zones and bands are its own time series' over the same window and its droplets its
+    count at the window's end (to 1e-9); a layer's load appears only in the top (roof) and bottom bands."""
+    import numpy as np
+    import pandas as pd
+
+    import popbal
+    from analysis.calibration.probe import zone_bands
+    from analysis.files import read_window_header
+    from settler.cases import load_case
+
+    run, folder = "demo_cell_25", "data/reference/demo_cell_25"
+    table = zone_bands(run, ZONES_CORE, load_registry("data/calibration/holdouts.toml"), closures="zones_core")
+    start, end = read_window_header(f"{folder}/collisions_by_height.csv")["window"]
+    height = table["z"].iloc[1] - table["z"].iloc[0]
+    collisions = pd.read_csv(f"{folder}/collisions_by_height.csv", comment="#")
+    loads = (table["full_core_load"] + table["full_return_load"]) * height
+    np.testing.assert_allclose(loads, collisions["volume_under_inlet"] + collisions["volume_elsewhere"], rtol=1e-3)
+    series = pd.read_csv(f"{folder}/timeseries.csv", comment="#")
+    in_window = (series["time"] > start) & (series["time"] <= end + 1e-9)
+    full = (table["full_merges_inlet"] + table["full_merges_elsewhere"]).sum() * (end - start)
+    assert full == pytest.approx(series.loc[in_window, "merges"].sum(), rel=1e-12)
+    assert (table["popbal_layer_load"].iloc[1:-1] == 0.0).all() and table["popbal_layer_load"].iloc[[0, -1]].min() > 0
+
+    from analysis.calibration.hierarchy import measured_closures
+    values = {**measured_closures(load_registry("data/calibration/holdouts.toml"), "data/reference",
+                                  "zones_core")["fixed"], **ZONES_CORE}
+    step = (end - start) / 20.0
+    case = load_case(f"{folder}/case.toml", {"case.calibration": "none", **values, "popbal.end_time": end,
+                                             "popbal.output_interval": step})
+    reduced = popbal.run(popbal.setup(case), progress=False).timeseries
+    booked = reduced.loc[(reduced["time"] > start + 1e-9) & (reduced["time"] <= end + 1e-9), "merges"].sum()
+    merged = table[["popbal_merges_channel", "popbal_merges_outer", "popbal_merges_layer"]].to_numpy().sum()
+    assert merged * (end - start) == pytest.approx(booked, rel=1e-9)
+    assert table["popbal_held"].sum() == pytest.approx(reduced["droplet_count"].iloc[-1], rel=1e-9)
+
+
+def test_the_band_table_refuses_a_holdout_before_running():
+    from analysis.calibration.probe import zone_bands
+
+    with pytest.raises(ValueError, match="deep_w003_fine is a pre-registered hold-out"):
+        zone_bands("deep_w003_fine", ZONES_CORE, load_registry("data/calibration/holdouts.toml"), closures="zones_core")
