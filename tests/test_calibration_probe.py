@@ -91,22 +91,27 @@ ZONES_CORE = {"popbal.plume_core_radius": 0.009473349689498752, "popbal.channel_
 
 
 def test_the_band_table_books_each_models_matte_and_merges_in_its_bands():
-    """zone_bands (probe --bands) against independent books: the full run's loads by band (plume_zones.csv, split by
-    radius) times the band height are the band volumes that collisions_by_height.csv splits by the inlet's disk
-    (to 1e-3), its merges per second times the window are the time series' merges over the window (exactly), and
-    popbal's merges summed over zones and bands are its own time series' over the same window and its droplets its
-    count at the window's end (to 1e-9); a layer's load appears only in the top (roof) and bottom bands."""
+    """zone_bands (probe --bands) against independent books, on a run whose stored tables start before the
+    calibration's window (demo_feed_double_fine: 20-60 against 30-60 s): the full run's loads by band
+    (plume_zones.csv, split by radius) times the band height are the band volumes that collisions_by_height.csv
+    splits by the inlet's disk (to 1e-3), its merges over the window the time series' (exactly); popbal's merges in
+    each band under the inlet (channel and roof layer) and elsewhere (outer zone and bottom layer) are those of its
+    own merges_by_height table between the window's ends, and its droplets the mean of its time series' count over
+    the window (to 1e-9)."""
     import numpy as np
     import pandas as pd
 
     import popbal
-    from analysis.calibration.probe import zone_bands
+    from analysis.calibration.hierarchy import measured_closures
+    from analysis.calibration.probe import BAND_OUTPUT_INTERVAL, zone_bands
     from analysis.files import read_window_header
     from settler.cases import load_case
 
-    run, folder = "demo_cell_25", "data/reference/demo_cell_25"
-    table = zone_bands(run, ZONES_CORE, load_registry("data/calibration/holdouts.toml"), closures="zones_core")
+    run, folder = "demo_feed_double_fine", "data/reference/demo_feed_double_fine"
+    registry = load_registry("data/calibration/holdouts.toml")
+    table = zone_bands(run, ZONES_CORE, registry, closures="zones_core")
     start, end = read_window_header(f"{folder}/collisions_by_height.csv")["window"]
+    assert (start, end) == (20.0, 60.0)
     height = table["z"].iloc[1] - table["z"].iloc[0]
     collisions = pd.read_csv(f"{folder}/collisions_by_height.csv", comment="#")
     loads = (table["full_core_load"] + table["full_return_load"]) * height
@@ -115,23 +120,54 @@ def test_the_band_table_books_each_models_matte_and_merges_in_its_bands():
     in_window = (series["time"] > start) & (series["time"] <= end + 1e-9)
     full = (table["full_merges_inlet"] + table["full_merges_elsewhere"]).sum() * (end - start)
     assert full == pytest.approx(series.loc[in_window, "merges"].sum(), rel=1e-12)
-    assert (table["popbal_layer_load"].iloc[1:-1] == 0.0).all() and table["popbal_layer_load"].iloc[[0, -1]].min() > 0
 
-    from analysis.calibration.hierarchy import measured_closures
-    values = {**measured_closures(load_registry("data/calibration/holdouts.toml"), "data/reference",
-                                  "zones_core")["fixed"], **ZONES_CORE}
-    step = (end - start) / 20.0
+    values = {**measured_closures(registry, "data/reference", "zones_core")["fixed"], **ZONES_CORE}
     case = load_case(f"{folder}/case.toml", {"case.calibration": "none", **values, "popbal.end_time": end,
-                                             "popbal.output_interval": step})
-    reduced = popbal.run(popbal.setup(case), progress=False).timeseries
-    booked = reduced.loc[(reduced["time"] > start + 1e-9) & (reduced["time"] <= end + 1e-9), "merges"].sum()
-    merged = table[["popbal_merges_channel", "popbal_merges_outer", "popbal_merges_layer"]].to_numpy().sum()
-    assert merged * (end - start) == pytest.approx(booked, rel=1e-9)
-    assert table["popbal_held"].sum() == pytest.approx(reduced["droplet_count"].iloc[-1], rel=1e-9)
+                                             "popbal.output_interval": BAND_OUTPUT_INTERVAL})
+    result = popbal.run(popbal.setup(case), progress=False)
+    books = result.merges_by_height()
+    between = books[books["time"].round(6) == end].set_index("z")[["merges_under_inlet", "merges_elsewhere"]] \
+        - books[books["time"].round(6) == start].set_index("z")[["merges_under_inlet", "merges_elsewhere"]]
+    layer = table["popbal_merges_layer"].to_numpy()
+    under = table["popbal_merges_channel"].to_numpy() + np.where(np.arange(len(table)) == len(table) - 1, layer, 0)
+    elsewhere = table["popbal_merges_outer"].to_numpy() + np.where(np.arange(len(table)) == 0, layer, 0)
+    np.testing.assert_allclose(under * (end - start), between["merges_under_inlet"].to_numpy(), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(elsewhere * (end - start), between["merges_elsewhere"].to_numpy(), rtol=1e-9,
+                               atol=1e-9)
+    reduced = result.timeseries
+    window = (reduced["time"] >= start - 1e-9) & (reduced["time"] <= end + 1e-9)
+    assert table["popbal_held"].sum() == pytest.approx(reduced.loc[window, "droplet_count"].mean(), rel=1e-9)
+    assert table["popbal_layer_load"].iloc[[0, -1]].min() > 0 and (table["popbal_layer_load"].iloc[1:-1] == 0).all()
 
 
-def test_the_band_table_refuses_a_holdout_before_running():
+@pytest.mark.parametrize("name", ["deep_w003_fine", "deep/", "./deep_fine", "../reference/demo_drho_07",
+                                  "demo_feed15_visc12_fine/.", "alias"])
+def test_the_band_table_refuses_a_holdout_however_named_before_running(name, tmp_path, monkeypatch):
+    """A hold-out is refused by name, by a path to it and through a link to its folder under another name, before
+    popbal is set up (here it would raise)."""
+    import os
+
+    import popbal
     from analysis.calibration.probe import zone_bands
+    from analysis.calibration.registry import RegistryError
 
-    with pytest.raises(ValueError, match="deep_w003_fine is a pre-registered hold-out"):
-        zone_bands("deep_w003_fine", ZONES_CORE, load_registry("data/calibration/holdouts.toml"), closures="zones_core")
+    def never(*args, **kwargs):
+        raise AssertionError("popbal ran for a hold-out")
+
+    monkeypatch.setattr(popbal, "setup", never)
+    monkeypatch.setattr(popbal, "run", never)
+    reference = "data/reference"
+    if name == "alias":
+        reference = tmp_path / "reference"
+        reference.mkdir()
+        for link in ("deep", "alias"):  # the hold-out's folder, and a link to it under another name
+            os.symlink(os.path.abspath("data/reference/deep"), reference / link)
+    with pytest.raises(RegistryError, match="is a pre-registered hold-out"):
+        zone_bands(name, ZONES_CORE, load_registry("data/calibration/holdouts.toml"), reference, "zones_core")
+
+
+def test_the_probe_skips_the_band_table_of_a_coalescence_off_run(capsys):
+    argv = ["--closures", "zones_core", "--runs", "demo_no_coalescence_fine", "--bands"]
+    argv += [f"--set={key}={value}" for key, value in ZONES_CORE.items()]
+    assert main(argv) == 0
+    assert "demo_no_coalescence_fine: no band table (coalescence off" in capsys.readouterr().out

@@ -55,7 +55,7 @@ def probe(runs, overrides: dict, registry, reference_dir="data/reference", closu
     from analysis.calibration.targets import TARGET_COLUMNS, load_target, seed_scatter
     from settler.cases import load_case
 
-    refuse_holdouts(runs, registry, "a probe")
+    refuse_holdouts(runs, registry, "a probe", reference_dir)
     fixed = {**measured_closures(registry, reference_dir, closures)["fixed"], **overrides}
     seed = seed_scatter(reference_dir)
     out = {}
@@ -74,35 +74,39 @@ def probe(runs, overrides: dict, registry, reference_dir="data/reference", closu
     return out
 
 
-#: Columns of :func:`zone_bands`: name -> (unit, meaning). Loads per metre of height, merges per second.
+#: Columns of :func:`zone_bands`: name -> (unit, meaning). Loads per metre of height, merges per second, all over
+#: the window of the run's stored diagnostic tables.
 BAND_COLUMNS = {
     "z": ("m", "the band's centre height (settler.output.PROFILE_BANDS equal bands)"),
     "full_core_load": ("m^3/m", "full run: droplet volume inside the plume's half-volume radius and its skirt "
-                                "(plume_zones.csv core + skirt), window mean"),
-    "full_return_load": ("m^3/m", "full run: droplet volume in the return flow (plume_zones.csv), window mean"),
-    "full_held": ("-", "full run: droplets in the band, window mean (collisions_by_height.csv)"),
-    "full_merges_inlet": ("1/s", "full run: merges under the inlet over the window (collisions_by_height.csv)"),
-    "full_merges_elsewhere": ("1/s", "full run: merges elsewhere over the window"),
-    "popbal_channel_load": ("m^3/m", "popbal: droplet volume in the channel zone at the window's end"),
-    "popbal_outer_load": ("m^3/m", "popbal: droplet volume in the outer zone (the return flow) at the window's end"),
-    "popbal_layer_load": ("m^3/m", "popbal: the roof layer's (top band) or bottom layer's (bottom band) droplet volume "
-                                   "over the band's height, at the window's end"),
-    "popbal_held": ("-", "popbal: droplets in the band's cells of every zone (the layers' in the top and bottom bands), "
-                         "at the window's end"),
-    "popbal_merges_channel": ("1/s", "popbal: merges in the channel zone's cells of the band over the window"),
-    "popbal_merges_outer": ("1/s", "popbal: merges in the outer zone's cells of the band over the window"),
-    "popbal_merges_layer": ("1/s", "popbal: merges in the roof layer (top band) or bottom layer (bottom band)"),
+                                "(plume_zones.csv core + skirt)"),
+    "full_return_load": ("m^3/m", "full run: droplet volume in the return flow (plume_zones.csv)"),
+    "full_held": ("-", "full run: droplets in the band (collisions_by_height.csv)"),
+    "full_merges_inlet": ("1/s", "full run: merges under the inlet (collisions_by_height.csv)"),
+    "full_merges_elsewhere": ("1/s", "full run: merges elsewhere"),
+    "popbal_channel_load": ("m^3/m", "popbal: droplet volume in the channel zone's cells of the band"),
+    "popbal_outer_load": ("m^3/m", "popbal: droplet volume in the outer zone's cells (the return flow)"),
+    "popbal_layer_load": ("m^3/m", "popbal: the roof or bottom layer's droplet volume over the band's height, in the "
+                                   "band that holds the layer's cell (the top one, the bottom one)"),
+    "popbal_held": ("-", "popbal: droplets in the band, every zone (a layer's in its cell's band)"),
+    "popbal_merges_channel": ("1/s", "popbal: merges in the channel zone's cells of the band"),
+    "popbal_merges_outer": ("1/s", "popbal: merges in the outer zone's cells of the band"),
+    "popbal_merges_layer": ("1/s", "popbal: merges in the roof or bottom layer (in its cell's band)"),
 }
+
+#: popbal's output interval for :func:`zone_bands` [s]: the stored tables' windows start and end on whole seconds.
+BAND_OUTPUT_INTERVAL = 0.5
 
 
 def zone_bands(run: str, overrides: dict, registry, reference_dir="data/reference",
                closures: str = "zones_line"):
     """One run's :data:`BAND_COLUMNS` table (pandas DataFrame, one row per height band, SI units): where the full run
-    and popbal (under ``closures``' measured values and ``overrides``, as :func:`probe` runs it, to the end of the
-    run's steady window) hold their droplets' volume and where they merge. popbal's merges are its ``merges`` over
-    the window (outputs every window / 20), its loads the state at the window's end; the full run's are the stored
-    tables' window means. ValueError for a registered hold-out, or a run without plume_zones.csv or
-    collisions_by_height.csv (nothing is run then)."""
+    and popbal (under ``closures``' measured values and ``overrides``, as :func:`probe` runs it) hold their droplets'
+    volume, how many, and where they merge, over the window of the run's stored ``collisions_by_height.csv`` and
+    ``plume_zones.csv`` (which can start earlier than the calibration's scored window): the full run's figures are
+    those tables' window means, popbal's the means over its outputs in the same window (loads and droplets) and its
+    merges between the window's ends. ValueError for a registered hold-out, a run without either table (a
+    coalescence-off run has no collisions table) or tables of different windows; nothing is run then."""
     import numpy as np
     import pandas as pd
 
@@ -110,79 +114,86 @@ def zone_bands(run: str, overrides: dict, registry, reference_dir="data/referenc
     from analysis.band_efficiency import COLLISIONS_FILE
     from analysis.calibration.hierarchy import measured_closures
     from analysis.calibration.registry import refuse_holdouts
-    from analysis.calibration.targets import load_target, seed_scatter
     from analysis.files import read_window_header
     from analysis.plume_zones import PLUME_ZONES_FILE
     from popbal.model import BOTTOM, CHANNEL, OUTER, ROOF
     from settler.cases import NO_CALIBRATION, load_case
     from settler.output import PROFILE_BANDS, band_edges
 
-    refuse_holdouts([run], registry, "a probe")
+    refuse_holdouts([run], registry, "a probe", reference_dir)
     folder = Path(reference_dir) / run
     for name in (PLUME_ZONES_FILE, COLLISIONS_FILE):
         if not (folder / name).is_file():
             raise ValueError(f"{folder / name}: not stored; the band table needs the run's {name}")
+    start, end = read_window_header(folder / COLLISIONS_FILE)["window"]
+    if read_window_header(folder / PLUME_ZONES_FILE)["window"] != (start, end):
+        raise ValueError(f"{folder}: {PLUME_ZONES_FILE} and {COLLISIONS_FILE} cover different windows; the band "
+                         "table needs one")
     zones = pd.read_csv(folder / PLUME_ZONES_FILE, comment="#")
     collisions = pd.read_csv(folder / COLLISIONS_FILE, comment="#")
-    start, end = read_window_header(folder / COLLISIONS_FILE)["window"]
     case_file = folder / "case.toml"
     values = {**measured_closures(registry, reference_dir, closures)["fixed"], **overrides}
     if not load_case(case_file).coalescence.enabled:
         values = {k: v for k, v in values.items() if k not in BOTTOM_KEYS}
-    window = load_target(run, reference_dir, seed_scatter(reference_dir)).window
-    step = (window[1] - window[0]) / 20.0
-    case = load_case(case_file, {"case.calibration": NO_CALIBRATION, **values, "popbal.end_time": window[1],
-                                 "popbal.output_interval": step})
+    case = load_case(case_file, {"case.calibration": NO_CALIBRATION, **values, "popbal.end_time": end,
+                                 "popbal.output_interval": BAND_OUTPUT_INTERVAL})
     result = popbal.run(popbal.setup(case), progress=False)
     model, arrays = result.model, result.arrays
     times = np.asarray(arrays["time"])
-    first = int(np.argmin(abs(times - window[0])))
-    volume = (np.asarray(arrays["number_density"])[-1]
-              * np.pi / 6.0 * np.nan_to_num(np.asarray(arrays["diameter"])[-1]) ** 3).sum(axis=-1)  # (Z, J)
-    load = volume * np.asarray(arrays["zone_area"])[:, None]  # m^3 per m of height in each zone's cells
-    held = np.asarray(arrays["number_density"])[-1].sum(axis=-1) * np.asarray(arrays["zone_area"])[:, None]  # 1/m
-    merges = (np.asarray(arrays["merges"])[-1] - np.asarray(arrays["merges"])[first]) / (times[-1] - times[first])
+    inside = (times >= start - 1e-9) & (times <= end + 1e-9)
+    first, last = np.flatnonzero(inside)[[0, -1]]
+    if abs(times[first] - start) > 1e-6 or abs(times[last] - end) > 1e-6:
+        raise ValueError(f"{folder}: popbal's outputs every {BAND_OUTPUT_INTERVAL} s do not fall on the window "
+                         f"{start}-{end} s")
+    area = np.asarray(arrays["zone_area"])[:, None]
+    number = np.asarray(arrays["number_density"])[inside]  # (T, Z, J, K)
+    volume = (number * np.pi / 6.0 * np.nan_to_num(np.asarray(arrays["diameter"])[inside]) ** 3).sum(axis=-1)
+    load = volume.mean(axis=0) * area  # (Z, J) m^3 per m of height in each zone's cells, window mean
+    held = number.sum(axis=-1).mean(axis=0) * area  # (Z, J) droplets per m of height
+    merges = (np.asarray(arrays["merges"])[last] - np.asarray(arrays["merges"])[first]) / (end - start)
     edges = band_edges(case.geometry.height, PROFILE_BANDS)
-    height = edges[1] - edges[0]
+    height, dz = edges[1] - edges[0], model.cell_height
+    band_of = np.clip(np.searchsorted(edges, model.z, side="right") - 1, 0, PROFILE_BANDS - 1)  # each cell's band
+    layer_band = {ROOF: band_of[-1], BOTTOM: band_of[0]}  # a layer's one cell: the top one, the bottom one
     rows = []
-    for b, (low, high) in enumerate(zip(edges[:-1], edges[1:])):
-        cells = (model.z >= low) & (model.z < high)
-        layer = ROOF if b == PROFILE_BANDS - 1 else BOTTOM if b == 0 else None
+    for b in range(PROFILE_BANDS):
+        cells = band_of == b
+        layers = [zone for zone, band in layer_band.items() if band == b]
         rows.append({
-            "z": 0.5 * (low + high),
+            "z": 0.5 * (edges[b] + edges[b + 1]),
             "full_core_load": float(zones["core_load"].iloc[b] + zones["skirt_load"].iloc[b]),
             "full_return_load": float(zones["return_load"].iloc[b]),
             "full_held": float(collisions["held"].iloc[b]),
             "full_merges_inlet": float(collisions["merges_under_inlet"].iloc[b]) / (end - start),
             "full_merges_elsewhere": float(collisions["merges_elsewhere"].iloc[b]) / (end - start),
-            "popbal_channel_load": float(load[CHANNEL, cells].sum()) * model.cell_height / height,
-            "popbal_outer_load": float(load[OUTER, cells].sum()) * model.cell_height / height,
-            "popbal_layer_load": 0.0 if layer is None else float(load[layer].sum()) * model.cell_height / height,
-            "popbal_held": float(held[[CHANNEL, OUTER]][:, cells].sum()) * model.cell_height
-            + (0.0 if layer is None else float(held[layer].sum()) * model.cell_height),
+            "popbal_channel_load": float(load[CHANNEL, cells].sum()) * dz / height,
+            "popbal_outer_load": float(load[OUTER, cells].sum()) * dz / height,
+            "popbal_layer_load": sum(float(load[zone].sum()) for zone in layers) * dz / height,
+            "popbal_held": (float(held[[CHANNEL, OUTER]][:, cells].sum()) + sum(float(held[zone].sum())
+                                                                              for zone in layers)) * dz,
             "popbal_merges_channel": float(merges[CHANNEL, cells].sum()),
             "popbal_merges_outer": float(merges[OUTER, cells].sum()),
-            "popbal_merges_layer": 0.0 if layer is None else float(merges[layer].sum()),
+            "popbal_merges_layer": sum(float(merges[zone].sum()) for zone in layers),
         })
     return pd.DataFrame(rows, columns=list(BAND_COLUMNS))
 
 
 def _print_bands(run, table):
-    print(f"  {run}: loads [cm^3/m] full core / return | popbal channel / outer / layer;  merges [1/s] full inlet / "
-          f"elsewhere | popbal channel / outer / layer;  droplets full | popbal")
+    print(f"  {run}: loads [cm^3/m] full core / return | popbal channel / outer / layer;  merges [1/s] full "
+          "inlet / elsewhere | popbal channel / outer / layer;  droplets full | popbal")
     for _, r in table.iloc[::-1].iterrows():
         print(f"    z {r.z:6.3f} m  {1e6 * r.full_core_load:7.1f} / {1e6 * r.full_return_load:7.1f} | "
-              f"{1e6 * r.popbal_channel_load:7.1f} / {1e6 * r.popbal_outer_load:7.1f} / {1e6 * r.popbal_layer_load:7.1f}"
-              f";  {r.full_merges_inlet:7.0f} / {r.full_merges_elsewhere:6.0f} | {r.popbal_merges_channel:7.0f} / "
-              f"{r.popbal_merges_outer:6.0f} / {r.popbal_merges_layer:7.0f};  {r.full_held:7.0f} | {r.popbal_held:7.0f}",
-              flush=True)
+              f"{1e6 * r.popbal_channel_load:7.1f} / {1e6 * r.popbal_outer_load:7.1f} / "
+              f"{1e6 * r.popbal_layer_load:7.1f};  {r.full_merges_inlet:7.0f} / {r.full_merges_elsewhere:6.0f} | "
+              f"{r.popbal_merges_channel:7.0f} / {r.popbal_merges_outer:6.0f} / {r.popbal_merges_layer:7.0f};  "
+              f"{r.full_held:7.0f} | {r.popbal_held:7.0f}", flush=True)
 
 
 def main(argv=None) -> int:
     from analysis.calibration.hierarchy import CLOSURES
     from analysis.calibration.registry import RegistryError, load_registry
     from analysis.calibration.targets import TARGET_COLUMNS
-    from settler.cases import CaseError
+    from settler.cases import CaseError, load_case
 
     parser = argparse.ArgumentParser(prog="python -m analysis.calibration.probe", description=(
         "popbal on training runs with a closure set's measured values and the values given, against the stored "
@@ -224,8 +235,12 @@ def main(argv=None) -> int:
     def report(run, errors, seconds):
         print(f"{run:28s}" + " / ".join(f"{100 * e:+5.0f}" for e in errors.values()) + f"   ({seconds:.0f} s)",
               flush=True)
-        if args.bands:
-            _print_bands(run, zone_bands(run, overrides, registry, args.reference_dir, args.closures))
+        if not args.bands:
+            return
+        if not load_case(Path(args.reference_dir) / run / "case.toml").coalescence.enabled:
+            print(f"  {run}: no band table (coalescence off: the run stores no collisions_by_height.csv)")
+            return
+        _print_bands(run, zone_bands(run, overrides, registry, args.reference_dir, args.closures))
 
     try:
         probe(runs, overrides, registry, args.reference_dir, args.closures, report)

@@ -59,14 +59,27 @@ def load_registry(path: str | Path = REGISTRY) -> Registry:
     return registry
 
 
-def refuse_holdouts(names, registry: Registry | None = None, where: str = "the fit") -> None:
+def refuse_holdouts(names, registry: Registry | None = None, where: str = "the fit", reference_dir=None) -> None:
     """Raise :class:`RegistryError` if any of ``names`` is a pre-registered hold-out of ``registry`` (default: the
-    shipped one)."""
+    shipped one): by name, by the last part of a path given for it ("deep/", "./deep_fine"), and, with
+    ``reference_dir``, by the folder it resolves to there (a link under another name)."""
     registry = registry or load_registry()
-    used = [n for n in names if n in registry.holdouts]
+
+    def holdout_of(name) -> str | None:
+        text = str(name)
+        for holdout in registry.holdouts:
+            if holdout in (text, Path(text).name) or (
+                    reference_dir is not None
+                    and (Path(reference_dir) / text).resolve() == (Path(reference_dir) / holdout).resolve()):
+                return holdout
+        return None
+
+    used = [(str(n), holdout_of(n)) for n in names if holdout_of(n)]
     if used:
-        raise RegistryError(f"{where}: {', '.join(used)} is a pre-registered hold-out ({registry.path.name}: "
-                            f"{registry.why[used[0]].split(':')[0][:80]}...); allowed: runs not in "
+        name, holdout = used[0]
+        shown = ", ".join(n if n == h else f"{n} ({h})" for n, h in used)
+        raise RegistryError(f"{where}: {shown} is a pre-registered hold-out ({registry.path.name}: "
+                            f"{registry.why[holdout].split(':')[0][:80]}...); allowed: runs not in "
                             f"{', '.join(registry.holdouts)}")
 
 
