@@ -548,8 +548,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", default=None, metavar="REGISTRY",
                         help="the hierarchical calibration over a registry of levels and pre-registered hold-outs "
                              "(data/calibration/holdouts.toml); then only --write, --out, --overwrite, "
-                             "--reference-dir, --max-evaluations, --quiet, --leave-out, --closures and --band-samples apply "
-                             "(analysis.calibration)")
+                             "--reference-dir, --max-evaluations, --quiet, --leave-out, --training-only, --closures, "
+                             "--band-samples and --workers apply (analysis.calibration)")
     parser.add_argument("--cases", default="simple",
                         help="comma-separated reference cases (folders of --reference-dir) to fit; default simple "
                              "(add cubic once data/reference/cubic exists)")
@@ -587,6 +587,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--leave-out", default=None, metavar="FAMILY",
                         help="with --set: leave-one-family-out cross-validation, the registry's [families] FAMILY "
                              "held out as well (fitted on the rest, scored with the hold-outs); not with --write")
+    parser.add_argument("--training-only", action="store_true",
+                        help="with --set: fit the registry's levels and score no hold-out, whatever the gate (a "
+                             "closure set tried on the training runs before it is final, so that the hold-outs stay "
+                             "blind); not with --write")
     parser.add_argument("--closures", default="designed", choices=CLOSURE_NAMES,
                         help="with --set: the closure set fitted: 'designed' (plume and return flow), 'layers' "
                              "(with popbal's roof and bottom layers: the roof law from the zone diagnostics, the "

@@ -329,6 +329,7 @@ def test_leaving_a_family_out_holds_its_runs_out_of_every_level():
 
 
 @pytest.mark.parametrize("extra, message", [(["--leave-out", "feed", "--write", "x.toml"], "not a calibration layer"),
+                                            (["--training-only", "--write", "x.toml"], "not a calibration layer"),
                                             (["--band-samples", "3"], "--band-samples 3: allowed 0"),
                                             (["--leave-out", "nope"], "--leave-out 'nope': holdouts.toml has no")])
 def test_settler_calibrate_set_refuses_bad_cross_validation_options(extra, message):
@@ -633,11 +634,15 @@ def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
     assert "confined plume" in (tmp_path / "zones.toml").read_text()
 
 
-@pytest.mark.parametrize("stored_whole, scored", [(("demo",), False), (("demo", "deep_w002"), True)])
-def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path, monkeypatch, stored_whole, scored):
+@pytest.mark.parametrize("stored_whole, training_only, scored", [(("demo",), False, False),
+                                                                (("demo", "deep_w002"), False, True),
+                                                                (("demo", "deep_w002"), True, False)])
+def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path, monkeypatch, stored_whole,
+                                                                       training_only, scored):
     """A hold-out is scored once, by the fit on every run the registry names: while a level's run is not stored
-    yet, a fit that passes its gate still reads no hold-out, and the summary says why. The fits are stubbed here
-    (their physics is tested above and in test_calibration.py); this is the rule only."""
+    yet, or when the fit is asked for the training levels alone (--training-only), a fit that passes its gate still
+    reads no hold-out, and the summary says why. The fits are stubbed here (their physics is tested above and in
+    test_calibration.py); this is the rule only."""
     import analysis.calibration.hierarchy as h
     import analysis.kernel_run as kr
     from analysis.calibration.fit import LevelFit
@@ -668,13 +673,16 @@ def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path,
     monkeypatch.setattr(h, "fit_level", fit_level)
     monkeypatch.setattr(h, "_score_holdouts", lambda registry, *a: (read.extend(registry.holdouts) or
                                                                     ({"deep": dict.fromkeys(h.TARGET_COLUMNS, 0.05)}, None)))
-    result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0)
+    result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, training_only=training_only)
     assert result.gate_passed
     assert (result.holdout_errors is not None) is scored
     assert read == (["deep", "deep_fine"] if scored else [])  # _score_holdouts itself scores the stored ones only
     assert result.missing["holdouts"] == ["deep_fine"]
     assert "hold-outs registered but not stored yet (not scored): deep_fine" in result.summary()
-    if not scored:
+    if training_only:
+        assert "whole" not in result.missing
+        assert "hold-outs: not scored (--training-only: the training levels alone)" in result.summary()
+    elif not scored:
         assert result.missing["whole"] == ["deep_w002"]
         assert "not scored (runs the registry names are not stored yet" in result.summary()
     else:

@@ -22,6 +22,11 @@ def run_set(args) -> int:
     workers = getattr(args, "workers", 1)
     if workers < 1:
         raise OutputError(f"--workers {workers!r}: allowed an integer >= 1")
+    training_only = getattr(args, "training_only", False)
+    if training_only and args.write:
+        raise OutputError(f"--write {args.write} with --training-only: a fit that scores no hold-out is a closure "
+                          "set's trial on the training runs, not a calibration layer; allowed: --out DIR for its "
+                          "results")
     if leave_out and args.write:
         raise OutputError(f"--write {args.write} with --leave-out {leave_out}: a cross-validation fit leaves runs out "
                           "on purpose and is not a calibration layer; allowed: --out DIR for its results")
@@ -34,13 +39,15 @@ def run_set(args) -> int:
                   "scored below with the pre-registered hold-outs")
         result = calibrate_set(registry, args.reference_dir, max_evaluations=args.max_evaluations,
                                progress=not args.quiet, band_samples=samples,
-                               closures=getattr(args, "closures", "designed"), workers=workers)
+                               closures=getattr(args, "closures", "designed"), workers=workers,
+                               training_only=training_only)
     except (RegistryError, FileNotFoundError) as exc:
         raise OutputError(str(exc)) from None
     text = result.summary()
     print(text)
     if out is not None:
         data = {"closures": result.closures, "roof": result.roof, "floor": result.floor, "leave_out": leave_out,
+                "training_only": training_only,
                 "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values,
                 "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,

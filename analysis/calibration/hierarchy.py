@@ -165,6 +165,7 @@ class Hierarchy:
     roof: dict | None = None  # the roof law from the zone diagnostics (roof_from_zones), with 'layers'
     floor: dict | None = None  # f_b from the floor layers (floor_layer.bottom_factor), with 'zones_floor'
     spread: dict | None = None  # the spread plume's core share (zones.spread_share_from_groups), with 'zones_core'
+    training_only: bool = False  # asked to score no hold-out (settler calibrate --training-only)
 
     def summary(self) -> str:
         c = self.collision
@@ -206,7 +207,8 @@ class Hierarchy:
             else:
                 lines.append(f"level {level}: registered but not stored yet: {', '.join(runs)}")
         if self.holdout_errors is None:
-            why = [] if self.gate_passed else ["the identifiability gate did not pass"]
+            why = ["--training-only: the training levels alone"] if self.training_only else []
+            why += [] if self.gate_passed else ["the identifiability gate did not pass"]
             if any(runs for level, runs in self.missing.items() if level != HOLDOUTS_KEY):
                 why.append("runs the registry names are not stored yet, and a hold-out is scored once, by the fit "
                            "on the whole set")
@@ -344,22 +346,24 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
 
 def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
                   profile: bool = True, progress: bool = True, band_samples: int = BAND_SAMPLES,
-                  closures: str = "designed", workers: int = 1) -> Hierarchy:
+                  closures: str = "designed", workers: int = 1, training_only: bool = False) -> Hierarchy:
     """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds, with the
     closure set ``closures`` (:data:`CLOSURES`); ``workers`` processes run each evaluation's popbal runs side by
-    side (:func:`analysis.calibration.fit.worker_pool`: the same numbers)."""
+    side (:func:`analysis.calibration.fit.worker_pool`: the same numbers). ``training_only``: no hold-out is scored,
+    whatever the gate (a closure set compared on the training runs before it is final)."""
     from .fit import worker_pool
 
     pool = worker_pool(workers)
     try:
         return _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, band_samples, closures,
-                              pool)
+                              pool, training_only)
     finally:
         if pool is not None:
             pool.shutdown()
 
 
-def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, band_samples, closures, pool):
+def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, band_samples, closures, pool,
+                   training_only=False):
     if closures not in CLOSURES:
         raise ValueError(f"closures {closures!r}: allowed {', '.join(CLOSURES)}")
     from settler.cases import load_case
@@ -402,14 +406,14 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
             fixed[f"popbal.{name}"] = fit.estimates[name]
     gate_passed = all(f.gate["passed"] for f in levels) and collision["standard_error"] < 0.5 * collision["efficiency"]
     holdout_errors, coverage_result = None, None
-    if gate_passed and not any(missing.values()):
+    if gate_passed and not any(missing.values()) and not training_only:
         holdout_errors, coverage_result = _score_holdouts(registry, reference_dir, seed, fixed, values, levels,
                                                           band_samples, pool)
     missing[HOLDOUTS_KEY] = _stored(registry.holdouts, reference_dir)[1]  # never scored, whatever the fit
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
                      missing={k: v for k, v in missing.items() if v}, coverage=coverage_result, closures=closures,
-                     roof=roof, floor=floor, spread=measured["spread"])
+                     roof=roof, floor=floor, spread=measured["spread"], training_only=training_only)
 
 
 def _band_means(target, case_file, fixed, values):
