@@ -162,7 +162,7 @@ class Result:
         merges, z = self.arrays["merges"], self.arrays["z"]
         under = merges[:, ROOF] + merges[:, CHANNEL]
         elsewhere = merges[:, OUTER] + merges[:, BOTTOM]
-        bands = _band_cells(z, self.case.geometry.height)
+        bands = band_cells(z, self.case.geometry.height)
         rows = [{"time": t, "z": centre, "merges_under_inlet": float(under[n, cells].sum()),
                  "merges_elsewhere": float(elsewhere[n, cells].sum())}
                 for n, t in enumerate(self.arrays["time"]) for centre, cells in bands]
@@ -306,14 +306,14 @@ def _channel(model: Model, content: np.ndarray, work: _Work, cells: np.ndarray):
 def _channel_profile(model: Model, content: np.ndarray, work: _Work, t: float) -> list[dict]:
     """Rows of settler.output.CHANNEL_PROFILE: the channel measures in PROFILE_BANDS height bands."""
     rows = []
-    for centre, cells in _band_cells(model.z, model.case.geometry.height):
+    for centre, cells in band_cells(model.z, model.case.geometry.height):
         radius, velocity, volume = _channel(model, content, work, cells)
         rows.append({"time": t, "z": centre, "channel_radius": radius, "channel_velocity": velocity,
                      "droplet_volume": volume})
     return rows
 
 
-def _band_cells(z: np.ndarray, height: float) -> list[tuple[float, np.ndarray]]:
+def band_cells(z: np.ndarray, height: float) -> list[tuple[float, np.ndarray]]:
     """(band centre [m], indices of the cells whose centres ``z`` [m] lie in it) for each height band of
     settler.output.band_edges: the bands of the channel profile and of merges_by_height.csv."""
     edges = band_edges(height)

@@ -44,6 +44,15 @@ def parse_setting(text: str) -> tuple[str, object]:
     return key, None if value == "none" else value
 
 
+def _run_values(case_file, fixed: dict) -> dict:
+    """The overrides a probe gives one run: ``fixed`` less the bottom layer's keys for a coalescence-off run."""
+    from settler.cases import load_case
+
+    if load_case(case_file).coalescence.enabled:
+        return dict(fixed)
+    return {k: v for k, v in fixed.items() if k not in BOTTOM_KEYS}
+
+
 def probe(runs, overrides: dict, registry, reference_dir="data/reference", closures: str = "zones_line",
           report=None) -> dict[str, dict[str, float]]:
     """{run: {column: reduced / full - 1}} for popbal on each stored run under ``closures``' measured values and
@@ -53,7 +62,6 @@ def probe(runs, overrides: dict, registry, reference_dir="data/reference", closu
     from analysis.calibration.hierarchy import measured_closures
     from analysis.calibration.registry import refuse_holdouts
     from analysis.calibration.targets import TARGET_COLUMNS, load_target, seed_scatter
-    from settler.cases import load_case
 
     refuse_holdouts(runs, registry, "a probe", reference_dir)
     fixed = {**measured_closures(registry, reference_dir, closures)["fixed"], **overrides}
@@ -61,10 +69,7 @@ def probe(runs, overrides: dict, registry, reference_dir="data/reference", closu
     out = {}
     for run in runs:
         case_file = Path(reference_dir) / run / "case.toml"
-        values = dict(fixed)
-        if not load_case(case_file).coalescence.enabled:
-            for key in BOTTOM_KEYS:
-                values.pop(key, None)
+        values = _run_values(case_file, fixed)
         start = time.perf_counter()
         target = load_target(run, reference_dir, seed)
         got = reduced_means(target, case_file, {}, values)
@@ -116,9 +121,9 @@ def zone_bands(run: str, overrides: dict, registry, reference_dir="data/referenc
     from analysis.calibration.registry import refuse_holdouts
     from analysis.files import read_window_header
     from analysis.plume_zones import PLUME_ZONES_FILE
+    from popbal.driver import band_cells
     from popbal.model import BOTTOM, CHANNEL, OUTER, ROOF
     from settler.cases import NO_CALIBRATION, load_case
-    from settler.output import PROFILE_BANDS, band_edges
 
     refuse_holdouts([run], registry, "a probe", reference_dir)
     folder = Path(reference_dir) / run
@@ -132,9 +137,7 @@ def zone_bands(run: str, overrides: dict, registry, reference_dir="data/referenc
     zones = pd.read_csv(folder / PLUME_ZONES_FILE, comment="#")
     collisions = pd.read_csv(folder / COLLISIONS_FILE, comment="#")
     case_file = folder / "case.toml"
-    values = {**measured_closures(registry, reference_dir, closures)["fixed"], **overrides}
-    if not load_case(case_file).coalescence.enabled:
-        values = {k: v for k, v in values.items() if k not in BOTTOM_KEYS}
+    values = _run_values(case_file, {**measured_closures(registry, reference_dir, closures)["fixed"], **overrides})
     case = load_case(case_file, {"case.calibration": NO_CALIBRATION, **values, "popbal.end_time": end,
                                  "popbal.output_interval": BAND_OUTPUT_INTERVAL})
     result = popbal.run(popbal.setup(case), progress=False)
@@ -151,16 +154,15 @@ def zone_bands(run: str, overrides: dict, registry, reference_dir="data/referenc
     load = volume.mean(axis=0) * area  # (Z, J) m^3 per m of height in each zone's cells, window mean
     held = number.sum(axis=-1).mean(axis=0) * area  # (Z, J) droplets per m of height
     merges = (np.asarray(arrays["merges"])[last] - np.asarray(arrays["merges"])[first]) / (end - start)
-    edges = band_edges(case.geometry.height, PROFILE_BANDS)
-    height, dz = edges[1] - edges[0], model.cell_height
-    band_of = np.clip(np.searchsorted(edges, model.z, side="right") - 1, 0, PROFILE_BANDS - 1)  # each cell's band
-    layer_band = {ROOF: band_of[-1], BOTTOM: band_of[0]}  # a layer's one cell: the top one, the bottom one
+    bands = band_cells(model.z, case.geometry.height)  # popbal's own bands (merges_by_height.csv's)
+    height, dz = case.geometry.height / len(bands), model.cell_height
+    top = len(model.z) - 1
     rows = []
-    for b in range(PROFILE_BANDS):
-        cells = band_of == b
-        layers = [zone for zone, band in layer_band.items() if band == b]
+    for b, (centre, cells) in enumerate(bands):
+        # a layer's one cell is the top one (roof) or the bottom one: the layer is booked in that cell's band
+        layers = [zone for zone, cell in ((ROOF, top), (BOTTOM, 0)) if cell in cells]
         rows.append({
-            "z": 0.5 * (edges[b] + edges[b + 1]),
+            "z": centre,
             "full_core_load": float(zones["core_load"].iloc[b] + zones["skirt_load"].iloc[b]),
             "full_return_load": float(zones["return_load"].iloc[b]),
             "full_held": float(collisions["held"].iloc[b]),
