@@ -171,3 +171,25 @@ def test_the_probe_skips_the_band_table_of_a_coalescence_off_run(capsys):
     argv += [f"--set={key}={value}" for key, value in ZONES_CORE.items()]
     assert main(argv) == 0
     assert "demo_no_coalescence_fine: no band table (coalescence off" in capsys.readouterr().out
+
+
+def test_a_probe_reports_the_matte_held_in_the_slag_against_the_full_runs(monkeypatch, capsys):
+    """The held-matte column is popbal's window mean of mass_in_slag over the full run's (timeseries.csv), less one:
+    with popbal replaced by the full run's own time series, its mass_in_slag doubled, the column reads +100 % and the
+    fitted columns, taken from the same rows, read 0."""
+    import pandas as pd
+
+    import analysis.calibration.fit as fit
+
+    def full_series_doubled(target, case_file, values, fixed=None):
+        series = pd.read_csv(case_file.parent / "timeseries.csv", comment="#")
+        return series.assign(mass_in_slag=2.0 * series["mass_in_slag"])
+
+    monkeypatch.setattr(fit, "reduced_series", full_series_doubled)
+    errors = probe(["demo_feed_half_fine"], {}, load_registry("data/calibration/holdouts.toml"),
+                   closures="zones_core")["demo_feed_half_fine"]
+    assert errors["mass_in_slag"] == pytest.approx(1.0, rel=1e-12)
+    assert errors["droplet_count"] == pytest.approx(0.0, abs=1e-9)
+    assert main(["--closures", "zones_core", "--runs", "demo_feed_half_fine"]) == 0
+    line = capsys.readouterr().out.splitlines()[1]
+    assert line.split()[0] == "demo_feed_half_fine" and "( +100)" in line, line

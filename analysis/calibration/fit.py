@@ -42,6 +42,11 @@ DISCREPANCY_ROUNDS = 3
 def reduced_means(target: Target, case_file, values: dict, fixed: dict | None = None) -> dict[str, float]:
     """The reduced model's :data:`TARGET_COLUMNS` over the target's window: popbal on the reference's resolved case
     ``case_file`` with [popbal] ``values`` and ``fixed`` overrides, run to the window's end."""
+    return window_means(reduced_series(target, case_file, values, fixed), target.window)
+
+
+def reduced_series(target: Target, case_file, values: dict, fixed: dict | None = None):
+    """popbal's time series (a pandas DataFrame, rows every 0.5 s) as :func:`reduced_means` runs it."""
     import popbal
     from settler.cases import NO_CALIBRATION, load_case
 
@@ -54,7 +59,7 @@ def reduced_means(target: Target, case_file, values: dict, fixed: dict | None = 
     overrides["popbal.end_time"] = target.window[1]
     overrides["popbal.output_interval"] = 0.5
     case = load_case(case_file, overrides)
-    return window_means(popbal.run(popbal.setup(case), progress=False).timeseries, target.window)
+    return popbal.run(popbal.setup(case), progress=False).timeseries
 
 
 @dataclass
