@@ -2,30 +2,35 @@
 
 popbal's channel collides the droplets it holds as if they were mixed over its section pi R_c^2 in each cell of
 height. A full run's droplets within R_c of the inlet axis are not mixed there: most of them crowd into a narrow
-core. For the droplets of one height band within a radius R of the axis this module sums the gravitational
-collisions two ways, as :mod:`analysis.band_efficiency` does for whole bands:
+core. The disk of radius R about the axis is taken as the grid columns whose centres lie within R (cubic cells of
+edge h from the origin, the run's own grid by default; area N_col h^2, equivalent radius R_eq = h sqrt(N_col / pi)),
+each cell and its droplets in the height band that holds the cell's centre. For a band's droplets in the disk this
+module sums the gravitational collisions two ways, as :mod:`analysis.band_efficiency` does for whole bands:
 
-- **cell by cell**, C_cell = sum over the grid's cubic cells of edge h of sum over the pairs in the cell of
-  pi (a_i + a_j)^2 abs(U_i - U_j) / h^3 (what the full engine's merges follow: their ratio, the cell efficiency, is
-  0.6-0.98 in every band of the training runs, ``collisions_by_height.csv``);
-- **well mixed** over the disk's slab, C_mixed = sum over all the band's pairs within R of the same kernel over
-  pi R^2 h_b (h_b the band's height): what popbal's channel of radius R counts holding those droplets;
+- **cell by cell**, C_cell = sum over the cells of sum over the pairs in the cell of
+  pi (a_i + a_j)^2 abs(U_i - U_j) / h^3 (the full engine's merges follow these: the kernel run's merges over its
+  cell-by-cell collisions give the collision efficiency E = 0.80 that zones_core takes);
+- **well mixed** over the disk's slab, C_mixed = the same kernel summed over all the band's pairs in the disk over
+  the slab's volume (its cells'): what popbal's channel of that section counts holding those droplets;
 
 with U the single-droplet terminal velocity of each droplet (:func:`settler.derived.settling_velocity`). Their ratio
-S = C_cell / C_mixed [-] is the **clustering factor** a channel of radius R lacks: a channel holding a run's droplets
-would merge them as the run does with efficiency E_cell S. The **collision radius** b = R / sqrt(S) [m] is the
-radius of the disk over which the droplets, mixed, would meet as often as they do (b = R for droplets spread
-uniformly over the disk; for droplets uniform over an area A inside it, S = pi R^2 / A exactly in expectation, which
-tests/test_channel_clustering.py checks).
+S = C_cell / C_mixed [-] is the **clustering factor** a channel of that section lacks: holding a run's droplets, it
+would merge them as the run does with efficiency E S. The **collision radius** b = R_eq / sqrt(S) [m] is the radius
+of the disk over which the droplets, mixed, would meet as often as they do. Droplets uniform over the disk give
+S = 1 in expectation in every band, droplets uniform over whole cells of area A inside it S = N_col h^2 / A
+(tests/test_channel_clustering.py checks both, the first with bands that are not whole numbers of cells). A disk
+of fewer than :data:`MIN_COLUMNS` columns is refused: the clustering within it is not resolved.
 
-``python -m analysis.channel_clustering RUN... [--radius MM]...`` prints S and b per band and over the interior
-bands (between the top one, the roof layer's, and the bottom one, the floor's); the default radii are popbal's
-channel radius under the run's case with the current calibration layer (``--layer`` another) and the inlet radius. A stored
-reference keeps one or few snapshots: S is measured on those, a run folder's every snapshot in the window is used.
+``python -m analysis.channel_clustering RUN... [--radius MM]... [--cell MM]`` prints S and b per band and over the
+interior bands (between the top one, the roof layer's, and the bottom one, the floor's); the default radii are
+popbal's channel radius under the run's case with the current calibration layer (``--layer`` another) and the inlet
+radius; ``--cell`` measures runs of different grids on one cell. The registered hold-outs are refused (the measure
+is for designing closures). A stored reference keeps one or few snapshots: S is measured on those, a run folder's
+every snapshot in the window is used.
 
 What it measures (2026-12-07, the stored training runs' last snapshot, docs/guide/reduced-model.md): at popbal's
-channel radius under zones_core, S = 1.75-3.0 in the demo families (R_c = 9.5 mm at 2.5 mm cells) and 6.8-6.9 in
-simple and cubic (R_c = 37.9 mm at 5 mm cells); b = 5.4-7.2 and 14.4-14.5 mm.
+channel radius under zones_core, S = 1.77-3.12 in the demo families (R_c = 9.5 mm at 2.5 mm cells) and 6.94 and
+6.75 in simple and cubic (R_c = 37.9 mm at 5 mm cells); b = 5.3-7.0 and 14.4-14.6 mm.
 """
 
 from __future__ import annotations
@@ -52,50 +57,83 @@ CLUSTERING_UNITS = {
 
 
 def disk_clustering(position, diameter, velocity, centre, radius: float, cell: float, height: float,
-                    bands: int = PROFILE_BANDS) -> pd.DataFrame:
-    """The :data:`CLUSTERING_UNITS` table of one snapshot's droplets within ``radius`` [m] of the vertical axis
-    through ``centre`` (x, y) [m]: position (n, 3) [m], diameter (n,) [m], velocity (n,) [m/s] (each droplet's
-    settling velocity), grid cells of edge ``cell`` [m] from the origin, ``bands`` equal height bands of ``height``
-    [m]. ValueError for a radius, cell or height that is not positive."""
-    if not (radius > 0.0 and cell > 0.0 and height > 0.0 and bands >= 1):
-        raise ValueError(f"radius = {radius!r} m, cell = {cell!r} m, height = {height!r} m, bands = {bands!r}: "
-                         "all must be > 0")
+                    extent: tuple[float, float], bands: int = PROFILE_BANDS) -> pd.DataFrame:
+    """The :data:`CLUSTERING_UNITS` table of one snapshot's droplets in the grid columns whose centres lie within
+    ``radius`` [m] of the vertical axis through ``centre`` (x, y) [m]: position (n, 3) [m], diameter (n,) [m],
+    velocity (n,) [m/s] (each droplet's settling velocity), cubic cells of edge ``cell`` [m] from the origin over a
+    box ``extent`` (width, depth) [m] wide, ``bands`` equal height bands of ``height`` [m], each cell (and so each
+    of its droplets) in the band that holds the cell's centre, as :func:`analysis.band_efficiency.
+    cell_collision_rates` counts it. The disk is those whole columns (area N_col h^2, its equivalent radius
+    sqrt(N_col / pi) h in ``meta``), so that droplets spread uniformly over it give S = 1 in expectation and a cell
+    is never cut. ValueError for a radius, cell, height or extent that is not positive, or a disk of fewer than
+    :data:`MIN_COLUMNS` columns (the measure needs the disk resolved)."""
+    if not (radius > 0.0 and cell > 0.0 and height > 0.0 and bands >= 1 and min(extent) > 0.0):
+        raise ValueError(f"radius = {radius!r} m, cell = {cell!r} m, height = {height!r} m, extent = {extent!r} m, "
+                         f"bands = {bands!r}: all must be > 0")
+    columns = disk_columns(centre, radius, cell, extent)
+    if len(columns) < MIN_COLUMNS:
+        raise ValueError(f"a radius of {radius * 1e3:g} mm holds {len(columns)} grid column(s) of {cell * 1e3:g} mm "
+                         f"(at least {MIN_COLUMNS} needed): the droplets' clustering within it is not resolved; "
+                         "give a larger radius")
     position = np.asarray(position, dtype=float).reshape(-1, 3)
     diameter = np.asarray(diameter, dtype=float)
     velocity = np.asarray(velocity, dtype=float)
-    inside = np.hypot(position[:, 0] - centre[0], position[:, 1] - centre[1]) < radius
-    position, diameter, velocity = position[inside], diameter[inside], velocity[inside]
-    band = np.clip(np.floor(position[:, 2] / height * bands).astype(np.int64), 0, bands - 1)
+    index = np.floor(position / cell).astype(np.int64)
+    inside = np.isin(index[:, 0] * COLUMN_KEY + index[:, 1], columns[:, 0] * COLUMN_KEY + columns[:, 1])
+    position, diameter, velocity, index = position[inside], diameter[inside], velocity[inside], index[inside]
+    band = np.clip(np.floor((index[:, 2] + 0.5) * cell / height * bands).astype(np.int64), 0, bands - 1)
     cells = cell_collision_rates(position, diameter, velocity, cell, height, bands)
     keys, sums = pair_sums(band, diameter, velocity)
+    area = len(columns) * cell**2
+    layers = np.arange(int(math.ceil(height / cell - 1e-9)))  # the cell layers, each in the band of its centre
+    slab = np.bincount(np.clip(np.floor((layers + 0.5) * cell / height * bands).astype(np.int64), 0, bands - 1),
+                       minlength=bands) * cell * area  # each band's volume of the disk's cells [m^3]
     mixed = np.zeros(bands)
-    mixed[keys] = math.pi * sums / (math.pi * radius**2 * height / bands)
-    return _table(height, bands, np.bincount(band, minlength=bands), cells, mixed, radius)
+    mixed[keys] = math.pi * sums / slab[keys]
+    return _table(height, bands, np.bincount(band, minlength=bands), cells, mixed, math.sqrt(area / math.pi))
+
+
+#: The fewest grid columns a disk must hold for :func:`disk_clustering` to measure within it.
+MIN_COLUMNS = 12
+#: Key of a column (i, j): i COLUMN_KEY + j (grids up to a million cells on a side).
+COLUMN_KEY = 1_000_003
+
+
+def disk_columns(centre, radius: float, cell: float, extent: tuple[float, float]) -> np.ndarray:
+    """(N_col, 2) [int] the (i, j) of the grid columns (cells of edge ``cell`` [m] from the origin, over a box
+    ``extent`` (width, depth) [m]) whose centres lie within ``radius`` [m] of ``centre`` (x, y) [m]."""
+    i = np.arange(int(math.ceil(extent[0] / cell - 1e-9)))
+    j = np.arange(int(math.ceil(extent[1] / cell - 1e-9)))
+    ii, jj = np.meshgrid(i, j, indexing="ij")
+    near = np.hypot((ii + 0.5) * cell - centre[0], (jj + 0.5) * cell - centre[1]) < radius
+    return np.column_stack([ii[near], jj[near]])
 
 
 def _table(height, bands, droplets, cells, mixed, radius) -> pd.DataFrame:
     with np.errstate(divide="ignore", invalid="ignore"):
         clustering = np.where(mixed > 0.0, cells / mixed, np.nan)
         collision_radius = np.where(clustering > 0.0, radius / np.sqrt(clustering), np.nan)
-    return pd.DataFrame({"z": (np.arange(bands) + 0.5) * height / bands, "droplets": droplets,
-                         "cell_collisions": cells, "mixed_collisions": mixed, "clustering": clustering,
-                         "collision_radius": collision_radius})
+    table = pd.DataFrame({"z": (np.arange(bands) + 0.5) * height / bands, "droplets": droplets,
+                          "cell_collisions": cells, "mixed_collisions": mixed, "clustering": clustering,
+                          "collision_radius": collision_radius})
+    table.attrs["radius"] = float(radius)  # the disk's equivalent radius sqrt(N_col / pi) h [m]
+    return table
 
 
-def interior(table: pd.DataFrame, radius: float) -> dict:
+def interior(table: pd.DataFrame) -> dict:
     """{"clustering" S [-], "collision_radius" b [m]} over the interior bands of a :func:`disk_clustering` table (all
-    but the top and the bottom one, where the roof and floor layers are): the sums of their collisions' ratio. NaN
-    where they hold no pair."""
+    but the top and the bottom one, where the roof and floor layers are): the ratio of their collisions' sums, and
+    the disk's equivalent radius (``table.attrs["radius"]``) over its square root. NaN where they hold no pair."""
     rows = table.sort_values("z").iloc[1:-1]
     mixed = float(rows["mixed_collisions"].sum())
     s = float(rows["cell_collisions"].sum()) / mixed if mixed > 0.0 else math.nan
-    return {"clustering": s, "collision_radius": radius / math.sqrt(s) if s > 0.0 else math.nan}
+    return {"clustering": s, "collision_radius": table.attrs["radius"] / math.sqrt(s) if s > 0.0 else math.nan}
 
 
 def channel_radius(case_file, layer: str | None = None) -> float:
     """popbal's channel radius R_c [m] in the case of ``case_file`` with the calibration layer ``layer`` applied
     (``case.calibration = layer``; None: :data:`analysis.calibration.bands.CURRENT_LAYER`): :func:`popbal.setup`'s.
-    settler.cases.CaseError for a name that is not a layer."""
+    settler.cases.CaseError for a name that is not a layer, or a case popbal refuses."""
     import popbal
     from settler.cases import load_case
 
@@ -104,11 +142,14 @@ def channel_radius(case_file, layer: str | None = None) -> float:
     return float(popbal.setup(load_case(case_file, {"case.calibration": layer or CURRENT_LAYER})).channel_radius)
 
 
-def measure_clustering(run, radius: float, window: tuple[float, float] | None = None) -> tuple[pd.DataFrame, dict]:
+def measure_clustering(run, radius: float, window: tuple[float, float] | None = None,
+                       cell: float | None = None) -> tuple[pd.DataFrame, dict]:
     """(table, meta) of a full run folder, stored reference or :class:`analysis.Run`: :func:`disk_clustering` about
-    its inlet axis at ``radius`` [m], its cells (``fulldem.cell_size``) and height, summed over its droplet snapshots
-    in ``window`` (default: its steady window, else its last third); meta {"window", "snapshots", "radius",
-    "cell"}. ValueError where the window holds no droplet snapshot or the inlet is a slot (a row of plumes)."""
+    its inlet axis at ``radius`` [m] on cells of edge ``cell`` [m] (default the run's ``fulldem.cell_size``; give
+    one size to compare runs of different grids), summed over its droplet snapshots in ``window`` (default: its
+    steady window, else its last third); meta {"window", "snapshots", "radius" (asked), "equivalent_radius" (the
+    disk's columns'), "cell"}. ValueError naming the run where the window holds no droplet snapshot, the inlet is
+    a slot (a row of plumes) or the disk is not resolved."""
     from .steady import window_snapshots
 
     run = _load(run)
@@ -118,21 +159,28 @@ def measure_clustering(run, radius: float, window: tuple[float, float] | None = 
                          "axis; the channel's clustering is measured about one axis")
     window, times = window_snapshots(run, window)
     if not times:
-        raise ValueError(f"{run.folder}: no droplet snapshot within {window[0]:g}-{window[1]:g} s (a stored "
-                         "reference keeps few; give the run folder or another window)")
-    cell, height = float(case.fulldem.cell_size), float(g.height)
-    total = None
+        held = len(run.snapshot_times())
+        raise ValueError(f"{run.folder}: no droplet snapshot within {window[0]:g}-{window[1]:g} s"
+                         + (" (it stores none)" if held == 0 else
+                            f" (it keeps {held}; give the run folder or another window)"))
+    cell = float(case.fulldem.cell_size) if cell is None else float(cell)
+    height, extent = float(g.height), (float(g.width), float(g.depth))
+    sums = None
     for t in times:
         _, d = run.droplets(t)
         diameter = d["diameter"].to_numpy(dtype=float)
         u = settling_velocity(case, diameter, d["density"].to_numpy(dtype=float))
-        one = disk_clustering(d[["x", "y", "z"]].to_numpy(dtype=float), diameter, u, tuple(case.inlet_center),
-                              radius, cell, height)
-        total = one if total is None else total.assign(
-            **{c: total[c] + one[c] for c in ("droplets", "cell_collisions", "mixed_collisions")})
-    table = _table(height, len(total), total["droplets"].to_numpy(), total["cell_collisions"].to_numpy(),
-                   total["mixed_collisions"].to_numpy(), radius)
-    return table, {"window": window, "snapshots": list(times), "radius": radius, "cell": cell}
+        try:
+            one = disk_clustering(d[["x", "y", "z"]].to_numpy(dtype=float), diameter, u, tuple(case.inlet_center),
+                                  radius, cell, height, extent)
+        except ValueError as exc:
+            raise ValueError(f"{run.folder}: {exc}") from None
+        part = one[["droplets", "cell_collisions", "mixed_collisions"]].to_numpy(dtype=float)
+        sums = part if sums is None else sums + part
+    equivalent = one.attrs["radius"]
+    table = _table(height, len(sums), sums[:, 0], sums[:, 1], sums[:, 2], equivalent)
+    return table, {"window": window, "snapshots": list(times), "radius": radius, "equivalent_radius": equivalent,
+                   "cell": cell}
 
 
 def _load(run):
@@ -145,15 +193,15 @@ def _load(run):
 
 
 def main(argv=None) -> int:
-    """``python -m analysis.channel_clustering RUN... [--radius MM]... [--window START:END]``: exit 0, or 2 with one
-    line naming the run or the value that failed."""
+    """``python -m analysis.channel_clustering RUN... [--radius MM]... [--cell MM] [--layer NAME] [--window
+    START:END] [--registry FILE]``: exit 0, or 2 with one line naming the run or the value that failed."""
     import argparse
     import sys
-
     from pathlib import Path
 
     from settler.cases import CaseError
 
+    from .calibration.registry import RegistryError, load_registry, refuse_holdouts
     from .files import NoData, OutputError
     from .steady import parse_window
 
@@ -167,36 +215,45 @@ def main(argv=None) -> int:
     parser.add_argument("--radius", type=float, action="append", metavar="MM",
                         help="radius [mm] about the inlet axis (repeatable); default popbal's channel radius under "
                              "the run's case with the calibration layer --layer, and the inlet radius")
+    parser.add_argument("--cell", type=float, metavar="MM", help="the measuring cell's edge [mm]; default each "
+                        "run's own grid cell (give one size to compare runs of different grids)")
     parser.add_argument("--layer", help="the calibration layer popbal's default radius is taken under (default "
                         "the current one, analysis.calibration.bands.CURRENT_LAYER)")
     parser.add_argument("--window", help="START:END [s]; default each run's steady window, else its last third")
+    parser.add_argument("--registry", default="data/calibration/holdouts.toml",
+                        help="the calibration's registry: its pre-registered hold-outs are refused (the measure is "
+                             "for designing closures, which the hold-outs must not inform)")
     args = parser.parse_args(argv)
     try:
         window = parse_window(args.window) if args.window else None
-        for value in args.radius or []:
-            if not (value > 0.0 and math.isfinite(value)):
-                raise ValueError(f"--radius {value!r}: a radius in mm must be a positive number")
-    except ValueError as exc:
+        for name, value in [("--radius", r) for r in args.radius or []] + [("--cell", args.cell)]:
+            if value is not None and not (value > 0.0 and math.isfinite(value)):
+                raise ValueError(f"{name} {value!r}: a length in mm must be a positive number")
+        refuse_holdouts(args.runs, load_registry(args.registry), "the clustering measure")
+    except (ValueError, OSError, RegistryError) as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
+    cell = args.cell * 1e-3 if args.cell else None
     for folder in args.runs:
         try:
             run = _load(folder)
             radii = [r * 1e-3 for r in args.radius] if args.radius else \
                 [channel_radius(Path(run.folder) / "case.toml", args.layer),
                  0.5 * float(run.case.geometry.inlet_diameter)]
-            for radius in radii:
-                table, meta = measure_clustering(run, radius, window)
-                _report(folder, table, meta)
+            measured = [measure_clustering(run, radius, window, cell) for radius in radii]
         except (OutputError, ValueError, OSError, NoData, CaseError) as exc:
-            print(f"{prog}: {exc}", file=sys.stderr)
+            text = str(exc)
+            print(f"{prog}: {text if text.startswith(str(folder)) else f'{folder}: {text}'}", file=sys.stderr)
             return 2
+        for table, meta in measured:
+            _report(folder, table, meta)
     return 0
 
 
 def _report(folder, table, meta) -> None:
-    inner = interior(table, meta["radius"])
-    print(f"{folder}: within R = {meta['radius'] * 1e3:.1f} mm of the inlet axis, cells {meta['cell'] * 1e3:g} mm, "
+    inner = interior(table)
+    print(f"{folder}: within R = {meta['radius'] * 1e3:.1f} mm of the inlet axis (grid columns of "
+          f"{meta['cell'] * 1e3:g} mm, equivalent radius {meta['equivalent_radius'] * 1e3:.1f} mm), "
           f"{len(meta['snapshots'])} snapshot(s) in {meta['window'][0]:g}-{meta['window'][1]:g} s: interior S = "
           f"{inner['clustering']:.2f}, b = {inner['collision_radius'] * 1e3:.1f} mm")
     for row in table.sort_values("z", ascending=False).itertuples():
