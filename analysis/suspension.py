@@ -1,0 +1,174 @@
+"""How a full run's droplets away from the plume are spread over the height, size by size (SI units).
+
+A droplet of settling velocity U in a column stirred with an eddy diffusivity D and no mean vertical flow settles
+into n(z) ∝ exp(-U z / D) (the steady Mason-Weaver profile: the settling flux U n balances the diffusive flux
+-D dn/dz). popbal's outer zone carries its droplets by the mean upflow alone, with no such spreading, so that a size
+whose U exceeds the upflow cannot stay suspended there. This module measures, in one snapshot (or several), the
+vertical profile of each size class of the droplets farther than ``exclude`` from the inlet axis (the plume's core
+left out) between a tenth and nine tenths of the height (the roof and floor layers left out), fits ln n = a - k z by
+Poisson-weighted least squares (weights n, the inverse variance of ln n), and gives the apparent diffusivity
+D = U_mean / k [m^2/s] of the class, U_mean its droplets' mean terminal velocity (:func:`settler.derived.
+settling_velocity`). Apparent: a mean upflow u there would make the slope (U - u) / D.
+
+``python -m analysis.suspension RUN... [--exclude MM] [--window START:END]`` prints the table; the registered
+hold-outs are refused (the measure is for designing closures). Default exclusion 0.6 of the inlet radius [chosen:
+outside the collision core of every training run, analysis.channel_clustering, and inside the box of each].
+
+What it measures (2026-12-07, the stored runs' last snapshot, docs/guide/reduced-model.md): in simple and cubic
+every class from 0.4 to 2 mm decays upward, apparent D rising with size from 0.9e-4 to 3.7e-4 m^2/s; the slopes
+follow k = k0 + U / D_e with k0 = 5.0 and 6.1 /m and D_e = 4.7e-4 and 6.1e-4 m^2/s, and demo_visc_half_fine's
+classes from 0.4 to 1 mm the same form with 5.1 /m and 4.0e-4 m^2/s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from settler.derived import settling_velocity
+
+#: Size-class edges [m] (the last class open above 2 mm is left out: too few droplets to fit).
+EDGES = np.array([0.0, 0.4, 0.6, 0.8, 1.0, 1.3, 2.0]) * 1e-3
+#: Height bins between a tenth and nine tenths of the height.
+HEIGHT_BINS = 8
+#: The fewest droplets a height bin needs to enter a fit, and the fewest bins a fit needs.
+MIN_BIN_COUNT, MIN_BINS = 5, 3
+#: Default exclusion radius about the inlet axis, as a share of the inlet radius [chosen, module docstring].
+EXCLUDE_SHARE = 0.6
+
+#: Columns of :func:`size_profiles`: name -> (unit, meaning).
+PROFILE_UNITS = {
+    "diameter_low": ("m", "the class's lower edge"),
+    "diameter_high": ("m", "the class's upper edge"),
+    "droplets": ("-", "droplets of the class in the fitted heights, summed over the snapshots"),
+    "settling_velocity": ("m/s", "their mean terminal velocity U"),
+    "slope": ("1/m", "k of ln n = a - k z, Poisson-weighted (NaN: too few droplets)"),
+    "slope_error": ("1/m", "its standard error"),
+    "diffusivity": ("m^2/s", "apparent D = U / k (NaN where k <= 0 or not fitted)"),
+}
+
+
+def fit_slope(z, counts) -> tuple[float, float]:
+    """(k [1/m], its standard error) of ln n = a - k z over the bins at heights ``z`` [m] holding ``counts`` (at
+    least :data:`MIN_BIN_COUNT` droplets each, else left out), weighted by n (Poisson: var ln n = 1/n); NaN with
+    fewer than :data:`MIN_BINS` such bins."""
+    z, n = np.asarray(z, dtype=float), np.asarray(counts, dtype=float)
+    keep = n >= MIN_BIN_COUNT
+    if keep.sum() < MIN_BINS:
+        return math.nan, math.nan
+    z, n = z[keep], n[keep]
+    zbar = float(np.sum(n * z) / n.sum())
+    sxx = float(np.sum(n * (z - zbar) ** 2))
+    slope = float(np.sum(n * (z - zbar) * np.log(n)) / sxx)
+    return -slope, 1.0 / math.sqrt(sxx)
+
+
+def size_profiles(snapshots, centre, exclude: float, height: float) -> pd.DataFrame:
+    """The :data:`PROFILE_UNITS` table of ``snapshots``, each a tuple (position (n, 3) [m], diameter (n,) [m],
+    settling velocity (n,) [m/s]): the droplets farther than ``exclude`` [m]
+    from the vertical axis through ``centre`` (x, y) [m] and between 0.1 and 0.9 of ``height`` [m], in
+    :data:`HEIGHT_BINS` equal bins."""
+    bins = np.linspace(0.1 * height, 0.9 * height, HEIGHT_BINS + 1)
+    mid = 0.5 * (bins[1:] + bins[:-1])
+    classes = len(EDGES) - 1
+    counts = np.zeros((classes, HEIGHT_BINS))
+    u_sum = np.zeros(classes)
+    for position, diameter, velocity in snapshots:
+        position = np.asarray(position, dtype=float).reshape(-1, 3)
+        far = np.hypot(position[:, 0] - centre[0], position[:, 1] - centre[1]) > exclude
+        inside = far & (position[:, 2] >= bins[0]) & (position[:, 2] < bins[-1])
+        k = np.searchsorted(EDGES, np.asarray(diameter, dtype=float), side="right") - 1
+        ok = inside & (k >= 0) & (k < classes)
+        np.add.at(counts, (k[ok], np.clip(np.searchsorted(bins, position[ok, 2], side="right") - 1, 0,
+                                           HEIGHT_BINS - 1)), 1.0)
+        np.add.at(u_sum, k[ok], np.asarray(velocity, dtype=float)[ok])
+    rows = []
+    for c in range(classes):
+        total = counts[c].sum()
+        slope, error = fit_slope(mid, counts[c])
+        u = u_sum[c] / total if total > 0 else math.nan
+        rows.append({"diameter_low": EDGES[c], "diameter_high": EDGES[c + 1], "droplets": total,
+                     "settling_velocity": u, "slope": slope, "slope_error": error,
+                     "diffusivity": u / slope if slope > 0 else math.nan})
+    return pd.DataFrame(rows)
+
+
+def measure_suspension(run, exclude: float | None = None,
+                       window: tuple[float, float] | None = None) -> tuple[pd.DataFrame, dict]:
+    """(table, meta) of a full run folder, stored reference or :class:`analysis.Run`: :func:`size_profiles` of its
+    droplet snapshots in ``window`` (default its steady window, else its last third) beyond ``exclude`` [m] (default
+    :data:`EXCLUDE_SHARE` of the inlet radius); meta {"window", "snapshots", "exclude"}. ValueError naming the run
+    where the window holds no snapshot or the inlet is a slot."""
+    from .channel_clustering import _load
+    from .steady import window_snapshots
+
+    run = _load(run)
+    case, g = run.case, run.case.geometry
+    if g.inlet_length:
+        raise ValueError(f"{run.folder}: a slot inlet feeds a row of plumes, not one axis to measure away from")
+    window, times = window_snapshots(run, window)
+    if not times:
+        held = len(run.snapshot_times())
+        raise ValueError(f"{run.folder}: no droplet snapshot within {window[0]:g}-{window[1]:g} s"
+                         + (" (it stores none)" if held == 0 else
+                            f" (it keeps {held}; give the run folder or another window)"))
+    exclude = EXCLUDE_SHARE * 0.5 * float(g.inlet_diameter) if exclude is None else float(exclude)
+    snapshots = []
+    for t in times:
+        _, d = run.droplets(t)
+        diameter = d["diameter"].to_numpy(dtype=float)
+        snapshots.append((d[["x", "y", "z"]].to_numpy(dtype=float), diameter,
+                          settling_velocity(case, diameter, d["density"].to_numpy(dtype=float))))
+    table = size_profiles(snapshots, tuple(case.inlet_center), exclude, float(g.height))
+    return table, {"window": window, "snapshots": list(times), "exclude": exclude}
+
+
+def main(argv=None) -> int:
+    """``python -m analysis.suspension RUN... [--exclude MM] [--window START:END] [--registry FILE]``: exit 0, or 2
+    with one line naming the run or the value that failed."""
+    import argparse
+    import sys
+
+    from .calibration.registry import RegistryError, load_registry, refuse_holdouts
+    from .files import NoData, OutputError
+    from .steady import parse_window
+
+    prog = "python -m analysis.suspension"
+    parser = argparse.ArgumentParser(prog=prog, description=(
+        "how a full run's droplets away from the plume are spread over the height, size class by size class: the "
+        "slope of ln n against z and the apparent eddy diffusivity D = U / slope"))
+    parser.add_argument("runs", nargs="+", help="full run folders or stored references")
+    parser.add_argument("--exclude", type=float, metavar="MM", help="radius [mm] about the inlet axis left out "
+                        f"(default {EXCLUDE_SHARE:g} of the inlet radius)")
+    parser.add_argument("--window", help="START:END [s]; default each run's steady window, else its last third")
+    parser.add_argument("--registry", default="data/calibration/holdouts.toml",
+                        help="the calibration's registry: its pre-registered hold-outs are refused")
+    args = parser.parse_args(argv)
+    try:
+        window = parse_window(args.window) if args.window else None
+        if args.exclude is not None and not (args.exclude >= 0.0 and math.isfinite(args.exclude)):
+            raise ValueError(f"--exclude {args.exclude!r}: a radius in mm must be zero or positive")
+        refuse_holdouts(args.runs, load_registry(args.registry), "the suspension measure")
+    except (ValueError, OSError, RegistryError) as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
+    for folder in args.runs:
+        try:
+            table, meta = measure_suspension(folder, None if args.exclude is None else args.exclude * 1e-3, window)
+        except (OutputError, ValueError, OSError, NoData) as exc:
+            text = str(exc)
+            print(f"{prog}: {text if text.startswith(str(folder)) else f'{folder}: {text}'}", file=sys.stderr)
+            return 2
+        print(f"{folder}: beyond {meta['exclude'] * 1e3:.1f} mm of the inlet axis, {len(meta['snapshots'])} "
+              f"snapshot(s) in {meta['window'][0]:g}-{meta['window'][1]:g} s")
+        for row in table.itertuples():
+            print(f"  d {row.diameter_low * 1e3:.1f}-{row.diameter_high * 1e3:.1f} mm  droplets {row.droplets:7.0f}"
+                  f"  U {row.settling_velocity * 1e3:5.2f} mm/s  slope {row.slope:7.1f} +- {row.slope_error:5.1f} /m"
+                  f"  D {row.diffusivity:.2e} m^2/s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
