@@ -443,7 +443,8 @@ def _return_zone(model: Model, content: np.ndarray, work: _Work, books: _Books, 
     work.lateral_out[:] = 0.0
     transport_two_way(content[OUTER], work.velocities[OUTER], model.sink_rate, work.top_source, bottom_source, dz, dt,
                       work.bottom_out, work.top_out, work.sink_out, work.rows[0], work.rows[1], work.rows[2],
-                      model.exchange_rate if entraining else work.no_loss, work.lateral_out)
+                      model.exchange_rate if entraining else work.no_loss, work.lateral_out,
+                      model.parameters["outer_dispersion"])
     if entraining:  # the plume takes the entrained droplets into the channel's cell at their height
         content[CHANNEL] += work.lateral_out * (area / model.zone_area[CHANNEL])
         books.exchanges[_PATH["outer_to_channel"]] += work.lateral_out[:, NUMBER].sum() * area * dz

@@ -610,7 +610,7 @@ def transport_zone(content, face_velocity, sink_rate, top_source, dz, dt, bottom
 
 @njit(cache=True)
 def transport_two_way(content, velocity, sink_rate, top_source, bottom_source, dz, dt, bottom_out, top_out,
-                      sink_out, diagonal, upper, rhs, loss_rate, lateral_out):
+                      sink_out, diagonal, upper, rhs, loss_rate, lateral_out, diffusivity):
     """Implicit (backward-Euler) first-order donor-cell transport in z of one zone over dt [s], for velocities of
     either sign: the return-flow zone, where droplets slower than the slag's upflow rise.
 
@@ -623,23 +623,29 @@ def transport_two_way(content, velocity, sink_rate, top_source, bottom_source, d
     droplets of cell 0), the top (rising droplets of the top cell) and the sink during dt, per m^2 of the zone.
     loss_rate (J,) [1/s, >= 0]: a sideways loss like the sink's (the plume's entrainment of the return flow,
     popbal.closures.exchange_rates; zeros: none), accumulated per cell into lateral_out (J, Q, K) [per m^3 of the
-    zone]. diagonal, upper, rhs (J,): work space. With every velocity >= 0 and no bottom source it gives
-    :func:`transport_zone`'s result (the same lower-triangular system).
+    zone]. diffusivity D [m^2/s, >= 0]: an eddy diffusivity spreading every section over the height (the
+    stirring of the box-wide circulation, popbal.outer_dispersion): each face passes D (c_j - c_{j+1}) / dz^2 per
+    second between its cells, none through the top and the bottom, adding d = D dt / dz^2 to both off-diagonals and
+    to the diagonal once per neighbour (still an M-matrix; conservative). diagonal, upper, rhs (J,): work space.
+    With every velocity >= 0, no bottom source and D = 0 it gives :func:`transport_zone`'s result (the same
+    lower-triangular system).
     """
     n_j, n_q, n_k = content.shape
     c = dt / dz
+    d = diffusivity * dt / (dz * dz)
     for k in range(n_k):
         for q in range(n_q):
-            # build: lower_j = -c v-_{j-1}, diagonal_j, upper_j = -c v+_{j+1}; forward elimination
+            # build: lower_j = -c v-_{j-1} - d, diagonal_j, upper_j = -c v+_{j+1} - d; forward elimination
             for j in range(n_j):
                 v = velocity[j, k]
-                diagonal[j] = 1.0 + c * abs(v) + dt * sink_rate[j] + dt * loss_rate[j]
-                upper[j] = -c * max(velocity[j + 1, k], 0.0) if j + 1 < n_j else 0.0
+                neighbours = (1.0 if j > 0 else 0.0) + (1.0 if j + 1 < n_j else 0.0)
+                diagonal[j] = 1.0 + c * abs(v) + dt * sink_rate[j] + dt * loss_rate[j] + d * neighbours
+                upper[j] = -c * max(velocity[j + 1, k], 0.0) - d if j + 1 < n_j else 0.0
                 rhs[j] = content[j, q, k]
             rhs[n_j - 1] += dt * top_source[q, k]
             rhs[0] += dt * bottom_source[q, k]
             for j in range(1, n_j):
-                lower = -c * max(-velocity[j - 1, k], 0.0)
+                lower = -c * max(-velocity[j - 1, k], 0.0) - d
                 if lower != 0.0:
                     factor = lower / diagonal[j - 1]
                     diagonal[j] -= factor * upper[j - 1]

@@ -312,6 +312,10 @@ def build(case: Case) -> Model:
     if p.confinement and ratio > 0.0:  # r multiplies the confined Stokes plume's return share S(R / R_c)
         ratio *= closures.confined_return_share(column_radius(case) / slag_core)
     return_velocity = closures.return_velocity(ratio, plume_velocity)
+    if p.outer_dispersion and not return_velocity > 0.0:
+        raise CaseError(f"popbal.outer_dispersion = {p.outer_dispersion!r} m^2/s: stirs a return flow this case does "
+                        "not have; allowed only with popbal.return_flow_ratio > 0 (or leave it out)")
+    parameters["outer_dispersion"] = float(p.outer_dispersion or 0.0)
     parameters["bottom_lift"], parameters["bottom_lift_velocity"] = bottom_lift(case, bottom_thickness,
                                                                                 return_velocity)
     parameters["bottom_turning"] = bottom_turning(case, bottom_thickness, return_velocity)

@@ -391,6 +391,14 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                            "channel's bottom a share min(1, U / u_up) settles (U their hindered "
                                            "settling velocity), the rest turning into the return flow "
                                            "(popbal.closures); absent or 0: no return flow.", 0.0, optional=True),
+        "outer_dispersion": Field(F, "m^2/s", "With a return flow: D, an eddy diffusivity that spreads the outer "
+                                              "zone's droplets over the height besides the upflow (the stirring of "
+                                              "the box-wide circulation, which keeps droplets faster than the mean "
+                                              "upflow suspended in the full runs: each size class decays upward as "
+                                              "exp(-(k0 + U / D) z) there, D 4.0e-4 to 6.1e-4 m^2/s in simple, cubic "
+                                              "and the demo, measured by python -m analysis.suspension; "
+                                              "popbal.kernels.transport_two_way); absent or 0: none.", 0.0,
+                                   optional=True),
         "confinement": Field(B, "", "true: the plume coefficient and the return flow follow the confined Stokes "
                                     "plume of the channel (radius R_c) in the column of the box's cross-section "
                                     "(radius R = sqrt(W D / pi)): u_s = sqrt(c_ch c(R/R_c) Q drho g / (pi mu)) and "
