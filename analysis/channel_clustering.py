@@ -93,7 +93,9 @@ def disk_clustering(position, diameter, velocity, centre, radius: float, cell: f
     return _table(height, bands, np.bincount(band, minlength=bands), cells, mixed, math.sqrt(area / math.pi))
 
 
-#: The fewest grid columns a disk must hold for :func:`disk_clustering` to measure within it.
+#: The fewest grid columns a disk must hold for :func:`disk_clustering` to measure within it [chosen: a disk of 12
+#: columns is about two cells across, the least over which a core narrower than the disk can show; the demo at 5 mm
+#: cells sits on it at R = 9.4 mm, so its collision radius there is at the limit of what the grid resolves].
 MIN_COLUMNS = 12
 #: Key of a column (i, j): i COLUMN_KEY + j (grids up to a million cells on a side).
 COLUMN_KEY = 1_000_003
@@ -165,6 +167,10 @@ def measure_clustering(run, radius: float, window: tuple[float, float] | None = 
                             f" (it keeps {held}; give the run folder or another window)"))
     cell = float(case.fulldem.cell_size) if cell is None else float(cell)
     height, extent = float(g.height), (float(g.width), float(g.depth))
+    for name, length in (("width", extent[0]), ("depth", extent[1]), ("height", height)):
+        if abs(length / cell - round(length / cell)) > 1e-6:
+            raise ValueError(f"{run.folder}: a measuring cell of {cell * 1e3:g} mm does not divide the box's {name} "
+                             f"({length * 1e3:g} mm) into whole cells; allowed: a cell that does")
     sums = None
     for t in times:
         _, d = run.droplets(t)
@@ -201,7 +207,7 @@ def main(argv=None) -> int:
 
     from settler.cases import CaseError
 
-    from .calibration.registry import RegistryError, load_registry, refuse_holdouts
+    from .calibration.registry import RegistryError, load_registry, refuse_holdout_folders
     from .files import NoData, OutputError
     from .steady import parse_window
 
@@ -229,7 +235,7 @@ def main(argv=None) -> int:
         for name, value in [("--radius", r) for r in args.radius or []] + [("--cell", args.cell)]:
             if value is not None and not (value > 0.0 and math.isfinite(value)):
                 raise ValueError(f"{name} {value!r}: a length in mm must be a positive number")
-        refuse_holdouts(args.runs, load_registry(args.registry), "the clustering measure")
+        refuse_holdout_folders(args.runs, load_registry(args.registry), "the clustering measure")
     except (ValueError, OSError, RegistryError) as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
@@ -243,7 +249,7 @@ def main(argv=None) -> int:
             measured = [measure_clustering(run, radius, window, cell) for radius in radii]
         except (OutputError, ValueError, OSError, NoData, CaseError) as exc:
             text = str(exc)
-            print(f"{prog}: {text if text.startswith(str(folder)) else f'{folder}: {text}'}", file=sys.stderr)
+            print(f"{prog}: {text if text.startswith(str(Path(folder))) else f'{folder}: {text}'}", file=sys.stderr)
             return 2
         for table, meta in measured:
             _report(folder, table, meta)

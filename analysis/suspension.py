@@ -8,16 +8,19 @@ vertical profile of each size class of the droplets farther than ``exclude`` fro
 left out) between a tenth and nine tenths of the height (the roof and floor layers left out), fits ln n = a - k z by
 Poisson-weighted least squares (weights n, the inverse variance of ln n), and gives the apparent diffusivity
 D = U_mean / k [m^2/s] of the class, U_mean its droplets' mean terminal velocity (:func:`settler.derived.
-settling_velocity`). Apparent: a mean upflow u there would make the slope (U - u) / D.
+settling_velocity`). Apparent: a mean upflow u there would make the slope (U - u) / D. The slopes' errors count the
+droplets as independent: summed over several snapshots of one run, which hold largely the same droplets, they are
+too small. :func:`settling_fit` fits the classes' slopes as one suspension, k = k0 + U / D_e.
 
 ``python -m analysis.suspension RUN... [--exclude MM] [--window START:END]`` prints the table; the registered
 hold-outs are refused (the measure is for designing closures). Default exclusion 0.6 of the inlet radius [chosen:
 outside the collision core of every training run, analysis.channel_clustering, and inside the box of each].
 
 What it measures (2026-12-07, the stored runs' last snapshot, docs/guide/reduced-model.md): in simple and cubic
-every class from 0.4 to 2 mm decays upward, apparent D rising with size from 0.9e-4 to 3.7e-4 m^2/s; the slopes
-follow k = k0 + U / D_e with k0 = 5.0 and 6.1 /m and D_e = 4.7e-4 and 6.1e-4 m^2/s, and demo_visc_half_fine's
-classes from 0.4 to 1 mm the same form with 5.1 /m and 4.0e-4 m^2/s.
+every class from 0.3 to 2 mm decays upward, the apparent D rising with size from 0.5e-4 to 3.7e-4 m^2/s, and
+:func:`settling_fit` gives k0 = 5.0 +- 0.2 and 5.5 +- 0.3 /m, D_e = (4.8 +- 0.3)e-4 and (5.0 +- 0.5)e-4 m^2/s
+(chi2 per degree of freedom 2.2 and 5.0). Of the demo families only demo_visc_half_fine determines D_e,
+(4.3 +- 2.2)e-4 m^2/s; in the others it is undetermined or the slope does not grow with U.
 """
 
 from __future__ import annotations
@@ -95,6 +98,33 @@ def size_profiles(snapshots, centre, exclude: float, height: float) -> pd.DataFr
     return pd.DataFrame(rows)
 
 
+def settling_fit(table: pd.DataFrame) -> dict:
+    """The classes' slopes as one stirred suspension, k = k0 + U / D_e (Mason-Weaver's U / D plus a gradient k0 that
+    even the slowest droplets share), fitted by least squares weighted by the slopes' standard errors over the classes
+    of ``table`` (:func:`size_profiles`) whose slope was fitted: {"k0" [1/m], "k0_error", "diffusivity" D_e [m^2/s],
+    "diffusivity_error", "chi2_per_dof" [-], "classes" [(low, high) [m]]}. The errors are scaled by sqrt(chi2 per
+    degree of freedom) where that exceeds 1 (the line does not hold within the slopes' own errors). NaN with fewer
+    than three classes."""
+    rows = table[np.isfinite(table["slope"]) & np.isfinite(table["slope_error"]) & (table["slope_error"] > 0)]
+    classes = [(float(a), float(b)) for a, b in zip(rows["diameter_low"], rows["diameter_high"])]
+    nan = {"k0": math.nan, "k0_error": math.nan, "diffusivity": math.nan, "diffusivity_error": math.nan,
+           "chi2_per_dof": math.nan, "classes": classes}
+    if len(rows) < 3:
+        return nan
+    u, k, w = (rows[c].to_numpy(dtype=float) for c in ("settling_velocity", "slope", "slope_error"))
+    a = np.column_stack([np.ones_like(u), u]) / w[:, None]
+    coefficients, *_ = np.linalg.lstsq(a, k / w, rcond=None)
+    covariance = np.linalg.inv(a.T @ a)
+    chi2 = float(np.sum(((k - coefficients[0] - coefficients[1] * u) / w) ** 2)) / (len(rows) - 2)
+    covariance *= max(chi2, 1.0)
+    k0, inverse = float(coefficients[0]), float(coefficients[1])
+    inverse_error = math.sqrt(covariance[1, 1])
+    return {"k0": k0, "k0_error": math.sqrt(covariance[0, 0]),
+            "diffusivity": 1.0 / inverse if inverse > 0 else math.nan,
+            "diffusivity_error": inverse_error / inverse**2 if inverse > 0 else math.nan,
+            "chi2_per_dof": chi2, "classes": classes}
+
+
 def measure_suspension(run, exclude: float | None = None,
                        window: tuple[float, float] | None = None) -> tuple[pd.DataFrame, dict]:
     """(table, meta) of a full run folder, stored reference or :class:`analysis.Run`: :func:`size_profiles` of its
@@ -130,8 +160,9 @@ def main(argv=None) -> int:
     with one line naming the run or the value that failed."""
     import argparse
     import sys
+    from pathlib import Path
 
-    from .calibration.registry import RegistryError, load_registry, refuse_holdouts
+    from .calibration.registry import RegistryError, load_registry, refuse_holdout_folders
     from .files import NoData, OutputError
     from .steady import parse_window
 
@@ -150,7 +181,7 @@ def main(argv=None) -> int:
         window = parse_window(args.window) if args.window else None
         if args.exclude is not None and not (args.exclude >= 0.0 and math.isfinite(args.exclude)):
             raise ValueError(f"--exclude {args.exclude!r}: a radius in mm must be zero or positive")
-        refuse_holdouts(args.runs, load_registry(args.registry), "the suspension measure")
+        refuse_holdout_folders(args.runs, load_registry(args.registry), "the suspension measure")
     except (ValueError, OSError, RegistryError) as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
@@ -159,7 +190,7 @@ def main(argv=None) -> int:
             table, meta = measure_suspension(folder, None if args.exclude is None else args.exclude * 1e-3, window)
         except (OutputError, ValueError, OSError, NoData) as exc:
             text = str(exc)
-            print(f"{prog}: {text if text.startswith(str(folder)) else f'{folder}: {text}'}", file=sys.stderr)
+            print(f"{prog}: {text if text.startswith(str(Path(folder))) else f'{folder}: {text}'}", file=sys.stderr)
             return 2
         print(f"{folder}: beyond {meta['exclude'] * 1e3:.1f} mm of the inlet axis, {len(meta['snapshots'])} "
               f"snapshot(s) in {meta['window'][0]:g}-{meta['window'][1]:g} s")
@@ -167,6 +198,11 @@ def main(argv=None) -> int:
             print(f"  d {row.diameter_low * 1e3:.1f}-{row.diameter_high * 1e3:.1f} mm  droplets {row.droplets:7.0f}"
                   f"  U {row.settling_velocity * 1e3:5.2f} mm/s  slope {row.slope:7.1f} +- {row.slope_error:5.1f} /m"
                   f"  D {row.diffusivity:.2e} m^2/s")
+        fit = settling_fit(table)
+        span = (f"{fit['classes'][0][0] * 1e3:.1f}-{fit['classes'][-1][1] * 1e3:.1f} mm" if fit["classes"] else "none")
+        print(f"  k = k0 + U / D_e over the {len(fit['classes'])} fitted classes ({span}), weighted by the slopes' "
+              f"errors: k0 {fit['k0']:.1f} +- {fit['k0_error']:.1f} /m, D_e {fit['diffusivity']:.2e} +- "
+              f"{fit['diffusivity_error']:.1e} m^2/s, chi2 per degree of freedom {fit['chi2_per_dof']:.1f}")
     return 0
 
 

@@ -395,8 +395,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                               "zone's droplets over the height besides the upflow (the stirring of "
                                               "the box-wide circulation, which keeps droplets faster than the mean "
                                               "upflow suspended in the full runs: each size class decays upward as "
-                                              "exp(-(k0 + U / D) z) there, D 4.0e-4 to 6.1e-4 m^2/s in simple, cubic "
-                                              "and the demo, measured by python -m analysis.suspension; "
+                                              "exp(-(k0 + U / D) z) there, D = 4.8e-4 and 5.0e-4 m^2/s in simple and "
+                                              "cubic, python -m analysis.suspension; "
                                               "popbal.kernels.transport_two_way); absent or 0: none.", 0.0,
                                    optional=True),
         "confinement": Field(B, "", "true: the plume coefficient and the return flow follow the confined Stokes "

@@ -144,3 +144,16 @@ def test_a_stored_run_reports_its_interior_clustering(capsys):
     assert abs(equivalent - 37.9) < 2.5  # within half a cell
     assert s > 1.0
     assert b == pytest.approx(equivalent / math.sqrt(s), abs=0.06)
+
+
+def test_a_measuring_cell_that_does_not_divide_the_box_is_refused_and_a_link_to_a_holdout_too(capsys, tmp_path):
+    """A partial last column or layer would count as a whole cell; a hold-out reached through a link under another
+    name is refused as by its name."""
+    assert main(["data/reference/simple", "--radius", "40", "--cell", "3"]) == 2  # 200 mm / 3 mm
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "does not divide the box's width (200 mm)" in err[0]
+    link = tmp_path / "some_run"
+    link.symlink_to((__import__("pathlib").Path("data/reference/deep_fine")).resolve())
+    assert main([str(link), "--radius", "20"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(deep_fine) is a pre-registered hold-out" in err[0]

@@ -212,3 +212,25 @@ def test_an_eddy_diffusivity_without_a_return_flow_is_refused_and_zero_changes_n
     stirred = popbal.run(popbal.setup("demo", {**keys, "popbal.outer_dispersion": 5e-4}), progress=False).timeseries
     assert zero.equals(plain)
     assert not stirred["droplet_count"].equals(plain["droplet_count"])
+
+
+def test_with_eddy_diffusion_every_droplet_is_booked_whatever_the_velocities():
+    """Velocities of either sign, a sink, the plume's sideways loss, sources at the top and the bottom and D > 0: what
+    the column holds after 50 steps plus what left through the floor, the top, the sink and the side equals what it
+    held plus what was fed, per section and quantity, to round-off."""
+    rng = np.random.default_rng(9)
+    cells, sections, dz, dt = 15, 4, 0.01, 0.3
+    content = rng.uniform(0.0, 1.0, (cells, QUANTITIES, sections))
+    velocity = rng.uniform(-3e-3, 3e-3, (cells, sections))
+    sink = rng.uniform(0.0, 0.05, cells)
+    loss = rng.uniform(0.0, 0.1, cells)
+    top, bottom = rng.uniform(0.0, 1.0, (2, QUANTITIES, sections))
+    before = content.sum(axis=0) * dz
+    outs = np.zeros((3, QUANTITIES, sections))
+    lateral = np.zeros((cells, QUANTITIES, sections))
+    steps = 50
+    for _ in range(steps):
+        transport_two_way(content, velocity, sink, top, bottom, dz, dt, outs[0], outs[1], outs[2],
+                          *_work(cells, sections, loss, lateral, diffusivity=4e-4))
+    after = content.sum(axis=0) * dz + outs.sum(axis=0) + lateral.sum(axis=0) * dz
+    assert after == pytest.approx(before + steps * dt * (top + bottom) * dz, rel=1e-12)

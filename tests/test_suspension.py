@@ -63,3 +63,20 @@ def test_bad_input_is_refused_in_one_line(capsys):
     assert main(["data/reference/deep_w005_fine"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].endswith("(it stores none)")
+
+
+def test_classes_on_one_stirred_line_give_back_k0_and_the_diffusivity():
+    """Slopes exactly k0 + U / D_e (k0 = 5 /m, D_e = 5e-4 m^2/s) at four velocities: the fit returns both to 1e-9 and
+    a chi2 of zero; two classes are too few."""
+    import pandas as pd
+
+    from analysis.suspension import settling_fit
+
+    u = np.array([0.6e-3, 1.1e-3, 1.9e-3, 4.7e-3])
+    table = pd.DataFrame({"diameter_low": [0.4e-3, 0.6e-3, 0.8e-3, 1.3e-3], "diameter_high": [0.6e-3, 0.8e-3, 1e-3,
+                                                                                              2e-3],
+                          "settling_velocity": u, "slope": 5.0 + u / 5e-4, "slope_error": [0.1, 0.2, 0.2, 0.5]})
+    fit = settling_fit(table)
+    assert fit["k0"] == pytest.approx(5.0, rel=1e-9) and fit["diffusivity"] == pytest.approx(5e-4, rel=1e-9)
+    assert fit["chi2_per_dof"] == pytest.approx(0.0, abs=1e-12) and len(fit["classes"]) == 4
+    assert math.isnan(settling_fit(table.iloc[:2])["diffusivity"])

@@ -83,6 +83,22 @@ def refuse_holdouts(names, registry: Registry | None = None, where: str = "the f
                             f"{', '.join(registry.holdouts)}")
 
 
+def refuse_holdout_folders(folders, registry: Registry | None = None, where: str = "the measure",
+                           reference_dir="data/reference") -> None:
+    """:func:`refuse_holdouts` for run folders given as paths (a measure on full runs, ``python -m
+    analysis.channel_clustering`` and ``analysis.suspension``): by name and last part as there, and by the folder a
+    path resolves to against each hold-out's folder under ``reference_dir`` (a link or copy path under another
+    name)."""
+    registry = registry or load_registry()
+    refuse_holdouts(folders, registry, where)
+    stored = {(Path(reference_dir) / h).resolve(): h for h in registry.holdouts}
+    for folder in folders:
+        holdout = stored.get(Path(folder).resolve())
+        if holdout is not None:
+            raise RegistryError(f"{where}: {folder} ({holdout}) is a pre-registered hold-out ({registry.path.name}); "
+                                f"allowed: runs not in {', '.join(registry.holdouts)}")
+
+
 def leave_family_out(registry: Registry, family: str) -> Registry:
     """The registry with one of its [families] held out as well (leave-one-family-out cross-validation): the
     family's runs (its coalescence-off variants listed with it) join the hold-outs (scored only after the gate, as
