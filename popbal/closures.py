@@ -492,6 +492,19 @@ def settling_share(settling_velocity, upflow):
     return np.clip(np.asarray(settling_velocity, dtype=float) / upflow, 0.0, 1.0)
 
 
+def turning_share(share, settling_velocity, upflow, uniform=False):
+    """The share [-] of the droplets leaving the channel's bottom that turn into the return flow, per section, for
+    ``bottom_turning_share`` T: T (1 - min(1, U / u_up)) (``bottom_turning_form = "selective"``: the faster a droplet
+    settles against the upflow u_up [m/s], the likelier it goes on down), or T for every size (``"uniform"``: the
+    box-wide circulation takes droplets of every size, as in the continued demo_cell_25, whose droplets turning into
+    rising slag and settling onto the floor have the same mean diameter, 0.61 and 0.58 mm, and in simple's and cubic's
+    interior, where every size class from 0.4 to 2 mm is spread over the box alike; analysis.suspension). U [m/s]."""
+    velocity = np.asarray(settling_velocity, dtype=float)
+    if uniform:
+        return np.full(velocity.shape, float(share))
+    return share * (1.0 - settling_share(velocity, upflow))
+
+
 def confined_axis_coefficient(column_to_core):
     """A0 = 2 ln(R/a) - 1 + (a/R)^2 [-]: the confined Stokes plume's axis velocity over F / (4 pi mu) (module
     docstring); NaN for R/a <= 1."""

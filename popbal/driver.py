@@ -39,7 +39,7 @@ from settler.output import (CHANNEL_PROFILE, MERGES_BY_HEIGHT, MID_BAND, atomic_
                             write_time_series)
 
 from . import limits
-from .closures import lift_share, settling_share
+from .closures import lift_share, settling_share, turning_share
 from .kernels import (AGE, FES_REMOVED, NEGLIGIBLE_VOLUME_FRACTION, NUMBER, QUANTITIES, cell_properties,
                       coalesce_zone, react_zone, transport_two_way, transport_zone)
 from .model import BOTTOM, CHANNEL, OUTER, ROOF, ZONES, Model, setup
@@ -402,8 +402,8 @@ def _step(model: Model, content: np.ndarray, work: _Work, books: _Books, zones: 
                 work.bottom_out *= share[None, :]
                 books.exchanges[_PATH["channel_to_outer"]] += work.turned[NUMBER].sum()
             elif p["bottom_turning"] > 0.0 and zone == CHANNEL:  # a share of the slow ones turns, the rest goes down
-                turning = p["bottom_turning"] * (1.0 - settling_share(work.velocities[OUTER, 0] + upflow,
-                                                                      model.return_velocity))
+                turning = turning_share(p["bottom_turning"], work.velocities[OUTER, 0] + upflow,
+                                        model.return_velocity, p["bottom_turning_uniform"])
                 work.turned[:] = work.bottom_out * turning[None, :] * area
                 work.bottom_out *= (1.0 - turning)[None, :]
                 books.exchanges[_PATH["channel_to_outer"]] += work.turned[NUMBER].sum()

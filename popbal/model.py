@@ -319,6 +319,10 @@ def build(case: Case) -> Model:
     parameters["bottom_lift"], parameters["bottom_lift_velocity"] = bottom_lift(case, bottom_thickness,
                                                                                 return_velocity)
     parameters["bottom_turning"] = bottom_turning(case, bottom_thickness, return_velocity)
+    if p.bottom_turning_form is not None and not parameters["bottom_turning"]:
+        raise CaseError(f"popbal.bottom_turning_form = {p.bottom_turning_form!r}: shapes a turn this case does not "
+                        "make; allowed only with popbal.bottom_turning_share > 0 (or leave it out)")
+    parameters["bottom_turning_uniform"] = p.bottom_turning_form == "uniform"
     return_upflow, exchange_rate, turning_weight = circulation(case, z, dz, return_velocity)
     return Model(case=case, grid=grid, cells=cells, cell_height=dz, z=z, zone_area=zone_area,
                  channel_radius=channel_radius, inlet_radius=inlet_radius, feed_density=case.matte.density,

@@ -351,6 +351,13 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                               "turns; popbal.closures); absent or 0: none turns (without a bottom "
                                               "layer the whole 1 - min(1, U_h / u_up) turns).", 0.0, 1.0,
                                       optional=True),
+        "bottom_turning_form": Field(S, "", "How bottom_turning_share turns the channel's droplets by size: "
+                                            "'selective' (a share T (1 - min(1, U_h / u_up)), the faster settling "
+                                            "going on down) or 'uniform' (T for every size: the box-wide "
+                                            "circulation takes every size alike, as the resolved runs' turning and "
+                                            "settling droplets of equal mean diameter show; popbal.closures."
+                                            "turning_share); absent: 'selective'. Needs bottom_turning_share.",
+                                     choices=("selective", "uniform"), optional=True),
         "entrainment_length": Field(F, "-", "With a return flow: the outer zone's upflow is u_up s(z) with s = "
                                             "(1 - exp(-(H - z) / (a R))) (1 - exp(-z / (b R))) over its peak, a = "
                                             "entrainment_length and b = turning_length in column radii R, and the "

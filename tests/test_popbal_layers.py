@@ -501,6 +501,46 @@ def test_turned_droplets_recirculate_and_the_bottom_layer_passes_the_feed_alone(
 
 
 @pytest.fixture(scope="module")
+def turned_uniformly():
+    model = popbal.setup("demo", SINGLE_SIZE + LAYERS + [f"popbal.bottom_turning_share={TURNING}",
+                                                          "popbal.bottom_turning_form=uniform",
+                                                          "popbal.return_flow_ratio=0.5",
+                                                          "popbal.end_time=400", "popbal.output_interval=20"])
+    return model, popbal.run(model, progress=False)
+
+
+def test_a_uniform_turn_takes_the_share_whatever_the_size_and_the_bottom_layer_still_passes_the_feed(
+        turned_uniformly):
+    """bottom_turning_form = 'uniform': a share t = T of what leaves the channel's bottom turns, whatever its settling
+    velocity (popbal.closures.turning_share), so at steady state the outer zone carries T Q / (1 - T) up, phi_o
+    (u_up - U_h(phi_o)) = T Q / ((1 - T) A_outer), the bottom layer still passes the feed alone and the mass is kept.
+    The selective form's share at the same size is T (1 - U_h / u_up), less."""
+    from popbal.closures import turning_share
+
+    model, result = turned_uniformly
+    case = model.case
+    q = case.feed.mass_rate / case.matte.density
+    own = settling_velocity(case, case.feed.mean_diameter)
+    n = model.parameters["hindered_exponent"]
+    u_up = model.return_velocity
+    assert u_up > own
+    u = np.array([0.0, 0.5 * u_up, u_up, 2.0 * u_up])
+    assert turning_share(TURNING, u, u_up, uniform=True) == pytest.approx(np.full(4, TURNING), rel=1e-15)
+    assert turning_share(TURNING, u, u_up) == pytest.approx(TURNING * np.array([1.0, 0.5, 0.0, 0.0]), rel=1e-15)
+    outer_expected = brentq(lambda phi: phi * (u_up - own * richardson_zaki_factor(phi, n))
+                            - TURNING * q / ((1.0 - TURNING) * model.zone_area[OUTER]), 0.0, 0.5, xtol=1e-18)
+    outer = _volume_fraction(result, OUTER, model.cells // 2)
+    assert _volume_fraction(result, BOTTOM, 0) == pytest.approx(_bottom_closed_form(model), rel=1e-4)
+    assert outer == pytest.approx(outer_expected, rel=1e-4)
+    _assert_mass_kept_and_the_feed_settles(result)
+
+
+def test_a_turning_form_without_a_turn_is_refused():
+    with pytest.raises(CaseError, match="popbal.bottom_turning_form = 'uniform': shapes a turn"):
+        popbal.setup("demo", SINGLE_SIZE + ["popbal.bottom_turning_form=uniform"])
+
+
+@pytest.fixture(scope="module")
 def circulating():
     # the turn above, and the circulation's profile: the upflow u_up s(z) over the whole height faster than the droplets
     # (entrainment over 0.2 R under the lid, turning over 0.05 R above the floor), the plume entraining the
