@@ -273,7 +273,9 @@ cell, as the whole 1 - min(1, U_h / u_up) does without a bottom layer, and the r
 steady state without coalescence the bottom layer then passes the feed alone and the outer zone carries
 t Q / (1 - t) up, t the fed size's turning share (tests/test_popbal_layers.py). About 0.6 on the run above
 (0.47 = T (1 - 1.0 / 3.8)); a constant to be measured on the resolved runs, with deep's 0 asking for a law in the
-plume's Reynolds number (7 against 0.3), as the transport closure's dispersion has.
+plume's Reynolds number (7 against 0.3), as the transport closure's dispersion has. That is the 'selective' form
+(``bottom_turning_form``, the default); since those turning and settling droplets have the same mean diameter, the
+'uniform' form turns the share T of every size (:func:`turning_share`).
 
 The return flow's circulation (``entrainment_length`` a, ``turning_length`` b). The full runs' plume takes the
 return flow's slag in under the lid and gives it back above the floor, and the return flow's droplets go with the

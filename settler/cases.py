@@ -348,8 +348,10 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                               "droplets of hindered settling velocity U_h turns up into the outer "
                                               "zone with the slag instead of entering the bottom layer (the resolved "
                                               "runs' plume gives part of its droplets to the return flow as it "
-                                              "turns; popbal.closures); absent or 0: none turns (without a bottom "
-                                              "layer the whole 1 - min(1, U_h / u_up) turns).", 0.0, 1.0,
+                                              "turns; popbal.closures); with bottom_turning_form 'uniform' the "
+                                              "share is bottom_turning_share for every size; absent or 0: none "
+                                              "turns (without a bottom layer the whole 1 - min(1, U_h / u_up) "
+                                              "turns).", 0.0, 1.0,
                                       optional=True),
         "bottom_turning_form": Field(S, "", "How bottom_turning_share turns the channel's droplets by size: "
                                             "'selective' (a share T (1 - min(1, U_h / u_up)), the faster settling "

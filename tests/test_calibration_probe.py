@@ -76,11 +76,13 @@ def test_a_coalescence_off_run_is_probed_without_the_bottom_layers_keys():
     from settler.cases import CaseError, load_case
 
     for key in BOTTOM_KEYS[1:]:  # after the layer's own factor, each key is one popbal refuses without the layer
+        value = "uniform" if key.endswith("_form") else 0.5
         with pytest.raises(CaseError, match=key.split(".")[1]):
             setup(load_case("data/reference/demo_no_coalescence_fine/case.toml",
-                            {"case.calibration": "none", key: 0.5, "popbal.end_time": 1.0}))
+                            {"case.calibration": "none", key: value, "popbal.end_time": 1.0}))
     overrides = {"popbal.plume_core_radius": 9.47e-3, "popbal.channel_radius_factor": 0.505,  # zones_core's, rounded
-                 "popbal.bottom_layer_factor": 0.35, "popbal.bottom_shear_coefficient": 0.157}
+                 "popbal.bottom_layer_factor": 0.35, "popbal.bottom_shear_coefficient": 0.157,
+                 "popbal.bottom_turning_share": 0.15, "popbal.bottom_turning_form": "uniform"}
     errors = probe(["demo_no_coalescence_fine"], overrides, load_registry("data/calibration/holdouts.toml"),
                    closures="zones_core")
     assert set(errors) == {"demo_no_coalescence_fine"}

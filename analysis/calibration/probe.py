@@ -27,8 +27,8 @@ import time
 from pathlib import Path
 
 #: Keys that need a bottom layer, which the coalescence-off runs are probed without (their floors fill).
-BOTTOM_KEYS = ("popbal.bottom_layer_factor", "popbal.bottom_turning_share", "popbal.bottom_drain_coefficient",
-               "popbal.bottom_shear_coefficient",
+BOTTOM_KEYS = ("popbal.bottom_layer_factor", "popbal.bottom_turning_share", "popbal.bottom_turning_form",
+               "popbal.bottom_drain_coefficient", "popbal.bottom_shear_coefficient",
                "popbal.bottom_lift_share", "popbal.bottom_lift_velocity_ratio")
 
 
