@@ -40,7 +40,6 @@ import math
 import numpy as np
 import pandas as pd
 
-from settler.derived import settling_velocity
 from settler.output import PROFILE_BANDS
 
 from .band_efficiency import cell_collision_rates, pair_sums
@@ -152,19 +151,10 @@ def measure_clustering(run, radius: float, window: tuple[float, float] | None = 
     steady window, else its last third); meta {"window", "snapshots", "radius" (asked), "equivalent_radius" (the
     disk's columns'), "cell"}. ValueError naming the run where the window holds no droplet snapshot, the inlet is
     a slot (a row of plumes) or the disk is not resolved."""
-    from .steady import window_snapshots
+    from .plume_zones import axis_window, settling_snapshots
 
-    run = _load(run)
+    run, window, times, _ = axis_window(run, window, (), "the channel's clustering is measured")
     case, g = run.case, run.case.geometry
-    if g.inlet_length:
-        raise ValueError(f"{run.folder}: a slot inlet ({g.inlet_length:g} m long) feeds a row of plumes, not one "
-                         "axis; the channel's clustering is measured about one axis")
-    window, times = window_snapshots(run, window)
-    if not times:
-        held = len(run.snapshot_times())
-        raise ValueError(f"{run.folder}: no droplet snapshot within {window[0]:g}-{window[1]:g} s"
-                         + (" (it stores none)" if held == 0 else
-                            f" (it keeps {held}; give the run folder or another window)"))
     cell = float(case.fulldem.cell_size) if cell is None else float(cell)
     height, extent = float(g.height), (float(g.width), float(g.depth))
     for name, length in (("width", extent[0]), ("depth", extent[1]), ("height", height)):
@@ -172,13 +162,9 @@ def measure_clustering(run, radius: float, window: tuple[float, float] | None = 
             raise ValueError(f"{run.folder}: a measuring cell of {cell * 1e3:g} mm does not divide the box's {name} "
                              f"({length * 1e3:g} mm) into whole cells; allowed: a cell that does")
     sums = None
-    for t in times:
-        _, d = run.droplets(t)
-        diameter = d["diameter"].to_numpy(dtype=float)
-        u = settling_velocity(case, diameter, d["density"].to_numpy(dtype=float))
+    for position, diameter, u in settling_snapshots(run, times):
         try:
-            one = disk_clustering(d[["x", "y", "z"]].to_numpy(dtype=float), diameter, u, tuple(case.inlet_center),
-                                  radius, cell, height, extent)
+            one = disk_clustering(position, diameter, u, tuple(case.inlet_center), radius, cell, height, extent)
         except ValueError as exc:
             raise ValueError(f"{run.folder}: {exc}") from None
         part = one[["droplets", "cell_collisions", "mixed_collisions"]].to_numpy(dtype=float)
@@ -187,15 +173,6 @@ def measure_clustering(run, radius: float, window: tuple[float, float] | None = 
     table = _table(height, len(sums), sums[:, 0], sums[:, 1], sums[:, 2], equivalent)
     return table, {"window": window, "snapshots": list(times), "radius": radius, "equivalent_radius": equivalent,
                    "cell": cell}
-
-
-def _load(run):
-    """``run`` as an :class:`analysis.Run` (a folder is loaded with :func:`analysis.load_run`)."""
-    from pathlib import Path
-
-    from .runs import load_run
-
-    return load_run(run) if isinstance(run, (str, Path)) else run
 
 
 def main(argv=None) -> int:
@@ -240,9 +217,11 @@ def main(argv=None) -> int:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
     cell = args.cell * 1e-3 if args.cell else None
+    from .runs import load_run
+
     for folder in args.runs:
         try:
-            run = _load(folder)
+            run = load_run(folder)
             radii = [r * 1e-3 for r in args.radius] if args.radius else \
                 [channel_radius(Path(run.folder) / "case.toml", args.layer),
                  0.5 * float(run.case.geometry.inlet_diameter)]

@@ -88,9 +88,9 @@ def band_value(rows: pd.DataFrame, name: str, column: str, time: float, centre: 
 
 def axis_window(run, window, files, what: str):
     """(run, window, snapshot times, folder) of a full run folder or :class:`analysis.Run` for a measure around its
-    inlet axis over ``window`` (default: its steady window, else its last third). ValueError where its inlet is a
-    slot (``what`` says what is measured around one axis), the window holds no droplet snapshot or the run lacks one
-    of ``files``."""
+    inlet axis over ``window`` (default: its steady window, else its last third). ValueError naming the run where its
+    inlet is a slot (``what`` says what is measured around one axis), the window holds no droplet snapshot or the run
+    lacks one of ``files``."""
     from .runs import load_run
     from .steady import window_snapshots
 
@@ -100,8 +100,10 @@ def axis_window(run, window, files, what: str):
                          "inlet)")
     window, times = window_snapshots(run, window)
     if not times:
-        raise ValueError(f"no droplet snapshot within {window[0]:g}-{window[1]:g} s (a stored reference keeps few; "
-                         "give the run folder or another window)")
+        held = len(run.snapshot_times())
+        raise ValueError(f"{run.folder}: no droplet snapshot within {window[0]:g}-{window[1]:g} s"
+                         + (" (it stores none)" if held == 0 else
+                            f" (it keeps {held}; give the run folder or another window)"))
     folder = Path(run.folder)
     missing = [n for n in files if not (folder / n).is_file()]
     if missing:
@@ -156,6 +158,21 @@ def zone_table(snapshots, channel: pd.DataFrame, zones: pd.DataFrame, height: fl
         with np.errstate(invalid="ignore", divide="ignore"):
             table[f"{part}_velocity"] = np.where(sums[part][:, 0] > 0.0, sums[part][:, 1] / sums[part][:, 0], np.nan)
     return pd.DataFrame(table)
+
+
+def settling_snapshots(run, times):
+    """[(position (n, 3) [m], diameter (n,) [m], terminal settling velocity (n,) [m/s])] of ``run``'s droplet
+    snapshots at ``times`` [s], the velocity :func:`settler.derived.settling_velocity`'s for each droplet's diameter
+    and density in the run's case."""
+    from settler.derived import settling_velocity
+
+    out = []
+    for t in times:
+        _, d = run.droplets(t)
+        diameter = d["diameter"].to_numpy(dtype=float)
+        out.append((d[["x", "y", "z"]].to_numpy(dtype=float), diameter,
+                    settling_velocity(run.case, diameter, d["density"].to_numpy(dtype=float))))
+    return out
 
 
 def measure_plume_zones(run, window: tuple[float, float] | None = None) -> tuple[pd.DataFrame, dict]:

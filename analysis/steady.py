@@ -9,6 +9,7 @@ cycles. Times in s.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -100,7 +101,8 @@ def window_measure_main(argv, prog: str, description: str, runs_help: str, measu
         try:
             table, meta = measure(folder, window)
         except (OutputError, ValueError, OSError, NoData) as exc:
-            print(f"{prog}: {folder}: {exc}", file=sys.stderr)
+            text = str(exc)  # the measures name the run themselves (analysis.plume_zones.axis_window)
+            print(f"{prog}: {text if text.startswith(str(Path(folder))) else f'{folder}: {text}'}", file=sys.stderr)
             return 2
         report(folder, table, meta)
     return 0

@@ -30,7 +30,6 @@ import math
 import numpy as np
 import pandas as pd
 
-from settler.derived import settling_velocity
 
 #: Size-class edges [m] (the last class open above 2 mm is left out: too few droplets to fit).
 EDGES = np.array([0.0, 0.4, 0.6, 0.8, 1.0, 1.3, 2.0]) * 1e-3
@@ -131,27 +130,13 @@ def measure_suspension(run, exclude: float | None = None,
     droplet snapshots in ``window`` (default its steady window, else its last third) beyond ``exclude`` [m] (default
     :data:`EXCLUDE_SHARE` of the inlet radius); meta {"window", "snapshots", "exclude"}. ValueError naming the run
     where the window holds no snapshot or the inlet is a slot."""
-    from .channel_clustering import _load
-    from .steady import window_snapshots
+    from .plume_zones import axis_window, settling_snapshots
 
-    run = _load(run)
-    case, g = run.case, run.case.geometry
-    if g.inlet_length:
-        raise ValueError(f"{run.folder}: a slot inlet feeds a row of plumes, not one axis to measure away from")
-    window, times = window_snapshots(run, window)
-    if not times:
-        held = len(run.snapshot_times())
-        raise ValueError(f"{run.folder}: no droplet snapshot within {window[0]:g}-{window[1]:g} s"
-                         + (" (it stores none)" if held == 0 else
-                            f" (it keeps {held}; give the run folder or another window)"))
+    run, window, times, _ = axis_window(run, window, (), "the suspension is measured away from")
+    g = run.case.geometry
     exclude = EXCLUDE_SHARE * 0.5 * float(g.inlet_diameter) if exclude is None else float(exclude)
-    snapshots = []
-    for t in times:
-        _, d = run.droplets(t)
-        diameter = d["diameter"].to_numpy(dtype=float)
-        snapshots.append((d[["x", "y", "z"]].to_numpy(dtype=float), diameter,
-                          settling_velocity(case, diameter, d["density"].to_numpy(dtype=float))))
-    table = size_profiles(snapshots, tuple(case.inlet_center), exclude, float(g.height))
+    snapshots = settling_snapshots(run, times)
+    table = size_profiles(snapshots, tuple(run.case.inlet_center), exclude, float(g.height))
     return table, {"window": window, "snapshots": list(times), "exclude": exclude}
 
 
