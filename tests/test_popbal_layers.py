@@ -464,22 +464,35 @@ def test_lift_share_falls_with_the_droplets_settling_velocity_over_the_upflow():
 TURNING = 0.6  # bottom_turning_share [-] (chosen for the test)
 
 
-@pytest.fixture(scope="module")
-def turned():
+def _turning_run(form):
     # a return flow ten times the other tests' (u_up 11.5 mm/s) brings the turned droplets round in a minute
     model = popbal.setup("demo", SINGLE_SIZE + LAYERS + [f"popbal.bottom_turning_share={TURNING}",
+                                                          f"popbal.bottom_turning_form={form}",
                                                           "popbal.return_flow_ratio=0.5",
                                                           "popbal.end_time=400", "popbal.output_interval=20"])
     return model, popbal.run(model, progress=False)
 
 
-def test_turned_droplets_recirculate_and_the_bottom_layer_passes_the_feed_alone(turned):
-    """A share t = T (1 - U_h / u_up) of what leaves the channel's bottom goes up the outer zone (U_h the outer zone's
-    bottom cell's hindered settling, which the step uses) and comes back down the channel, so at steady state the
-    bottom layer passes the feed alone, phi U_h(phi) = Q / A_box as without turning, and the outer zone carries the
-    turned flux t Q / (1 - t) up at u_up - U_h(phi_o): phi_o (u_up - U_h(phi_o)) = t Q / ((1 - t) A_outer); what
-    settles is the feed, and the mass is kept."""
-    model, result = turned
+@pytest.fixture(scope="module")
+def turned():
+    return _turning_run("selective")
+
+
+@pytest.fixture(scope="module")
+def turned_uniformly():
+    return _turning_run("uniform")
+
+
+@pytest.mark.parametrize("fixture", ["turned", "turned_uniformly"])
+def test_turned_droplets_recirculate_and_the_bottom_layer_passes_the_feed_alone(fixture, request):
+    """A share t of what leaves the channel's bottom goes up the outer zone and comes back down the channel: t = T
+    (1 - U_h / u_up) in the selective form (U_h the outer zone's bottom cell's hindered settling, which the step
+    uses), t = T whatever the size in the uniform one (popbal.closures.turning_share). So at steady state the bottom
+    layer passes the feed alone, phi U_h(phi) = Q / A_box as without turning, and the outer zone carries the turned
+    flux t Q / (1 - t) up at u_up - U_h(phi_o): phi_o (u_up - U_h(phi_o)) = t Q / ((1 - t) A_outer); what settles is
+    the feed, and the mass is kept."""
+    model, result = request.getfixturevalue(fixture)
+    form = "uniform" if fixture == "turned_uniformly" else "selective"
     case = model.case
     q = case.feed.mass_rate / case.matte.density
     own = settling_velocity(case, case.feed.mean_diameter)
@@ -487,52 +500,27 @@ def test_turned_droplets_recirculate_and_the_bottom_layer_passes_the_feed_alone(
     u_up = model.return_velocity
     assert u_up > own  # the turned droplets rise: the closed form below assumes it
     bottom_cell = _volume_fraction(result, OUTER, 0)
-    t = TURNING * (1.0 - own * richardson_zaki_factor(bottom_cell, n) / u_up)
+    t = TURNING if form == "uniform" else TURNING * (1.0 - own * richardson_zaki_factor(bottom_cell, n) / u_up)
     outer_expected = brentq(lambda phi: phi * (u_up - own * richardson_zaki_factor(phi, n))
                             - t * q / ((1.0 - t) * model.zone_area[OUTER]), 0.0, 0.5, xtol=1e-18)
     outer = _volume_fraction(result, OUTER, model.cells // 2)
     got, expected = _volume_fraction(result, BOTTOM, 0), _bottom_closed_form(model)
-    print(f"\nturned: bottom phi {got:.6g} against {expected:.6g}; outer zone mid-height {outer:.4g} against "
-          f"{outer_expected:.4g} (t = {t:.4f})")
+    print(f"\nturned ({form}): bottom phi {got:.6g} against {expected:.6g}; outer zone mid-height {outer:.4g} "
+          f"against {outer_expected:.4g} (t = {t:.4f})")
     assert got == pytest.approx(expected, rel=1e-4)
     assert outer == pytest.approx(outer_expected, rel=1e-4)
     assert outer > 0.5 * t / (1.0 - t) * q / (model.zone_area[OUTER] * u_up)  # the turn matters here
     _assert_mass_kept_and_the_feed_settles(result)
 
 
-@pytest.fixture(scope="module")
-def turned_uniformly():
-    model = popbal.setup("demo", SINGLE_SIZE + LAYERS + [f"popbal.bottom_turning_share={TURNING}",
-                                                          "popbal.bottom_turning_form=uniform",
-                                                          "popbal.return_flow_ratio=0.5",
-                                                          "popbal.end_time=400", "popbal.output_interval=20"])
-    return model, popbal.run(model, progress=False)
-
-
-def test_a_uniform_turn_takes_the_share_whatever_the_size_and_the_bottom_layer_still_passes_the_feed(
-        turned_uniformly):
-    """bottom_turning_form = 'uniform': a share t = T of what leaves the channel's bottom turns, whatever its settling
-    velocity (popbal.closures.turning_share), so at steady state the outer zone carries T Q / (1 - T) up, phi_o
-    (u_up - U_h(phi_o)) = T Q / ((1 - T) A_outer), the bottom layer still passes the feed alone and the mass is kept.
-    The selective form's share at the same size is T (1 - U_h / u_up), less."""
+def test_the_two_turning_forms_shares():
+    """'uniform' turns T of every size; 'selective' T (1 - min(1, U / u_up))."""
     from popbal.closures import turning_share
 
-    model, result = turned_uniformly
-    case = model.case
-    q = case.feed.mass_rate / case.matte.density
-    own = settling_velocity(case, case.feed.mean_diameter)
-    n = model.parameters["hindered_exponent"]
-    u_up = model.return_velocity
-    assert u_up > own
+    u_up = 4e-3
     u = np.array([0.0, 0.5 * u_up, u_up, 2.0 * u_up])
     assert turning_share(TURNING, u, u_up, uniform=True) == pytest.approx(np.full(4, TURNING), rel=1e-15)
     assert turning_share(TURNING, u, u_up) == pytest.approx(TURNING * np.array([1.0, 0.5, 0.0, 0.0]), rel=1e-15)
-    outer_expected = brentq(lambda phi: phi * (u_up - own * richardson_zaki_factor(phi, n))
-                            - TURNING * q / ((1.0 - TURNING) * model.zone_area[OUTER]), 0.0, 0.5, xtol=1e-18)
-    outer = _volume_fraction(result, OUTER, model.cells // 2)
-    assert _volume_fraction(result, BOTTOM, 0) == pytest.approx(_bottom_closed_form(model), rel=1e-4)
-    assert outer == pytest.approx(outer_expected, rel=1e-4)
-    _assert_mass_kept_and_the_feed_settles(result)
 
 
 def test_a_turning_form_without_a_turn_is_refused():
