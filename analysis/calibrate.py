@@ -91,7 +91,7 @@ SINGULAR_RATIO_LIMIT = 1e-3
 #: The closure sets of ``--closures`` (analysis.calibration.hierarchy.CLOSURES, not imported here so that the command
 #: line starts without the calibration package; a test holds the two equal).
 CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy", "zones", "zones_dilution", "zones_floor", "zones_line",
-                 "zones_drain", "zones_core")
+                 "zones_drain", "zones_core", "zones_stir")
 
 
 class CalibrationError(ValueError):

@@ -244,7 +244,17 @@ merges under the inlet between the floor's and the roof's height bands over the 
 popbal's channel section are 1.4 / 2.3 / 5.3 at half / one / twice the demo's feed at 2.5 mm cells, 1.4-1.5 in simple
 and cubic, 1.0-2.3 in deep's columns, where cell by cell the engine merges 1.5-2.6 pairs per gravitational collision
 (:func:`analysis.calibration.zones.channel_kernel_from_collisions`; 2026-12-06, docs/guide/reduced-model.md).
-E_ch multiplies both kernels in the channel zone and nowhere else; no law sets it yet and no stored layer has it.
+E_ch multiplies both kernels in the channel zone and nowhere else; no stored layer has it.
+
+The channel's collision radius (``channel_collision_radius`` b, ``spread_channel_collision_radius`` b_s): the law
+for E_ch. Cell by cell the full runs' droplets within R_c of the inlet axis collide S times as often as the same
+droplets mixed over those grid columns (:mod:`analysis.channel_clustering`), as if mixed over a disk of radius
+b = R_eq / sqrt(S); the engine merges E = 0.80 of its cell-by-cell collisions (the kernel run). So popbal's channel
+takes E_ch = E max(1, (R_c / b)^2): its droplets collide as if mixed over pi b^2, or over the channel where it is
+narrower, and its collisions do not depend on the channel radius a fit takes. On the second registration's training
+runs at R_c 9.5 mm (zones_core's start): b 5.3-7.0 mm in the five compact demo runs (S 1.8-3.1), 14.0-14.2 mm in
+simple and cubic at 37.5 mm (S 6.7-7.0), the regime's own b; deep_w002's 5 mm channel (12 columns) gives S 0.07,
+its droplets fill the disk (2026-12-07, docs/guide/reduced-model.md).
 
 The bottom layer's lift into the return flow (``bottom_lift_share`` lambda, ``bottom_lift_velocity_ratio`` beta).
 Resolved, the floor does give droplets back. The demo at 2.5 mm cells, continued from its stored 25 s run to 60 s

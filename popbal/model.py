@@ -266,8 +266,7 @@ def build(case: Case) -> Model:
         # the roof layer's own kernel and the bottom layer's drainage (popbal.closures); absent: the channel's, none
         "roof_efficiency": p.collision_efficiency if p.roof_collision_efficiency is None
         else p.roof_collision_efficiency,
-        "channel_efficiency": p.collision_efficiency if p.channel_collision_efficiency is None
-        else p.channel_collision_efficiency,
+        "channel_efficiency": channel_efficiency(case, channel_radius),
         # the roof layer's droplets leave it at u_L (+ w) alone ('cloud') or plus their own settling ('sizes')
         "roof_cloud_drainage": p.roof_drainage == "cloud",
         "roof_shear_coefficient": p.shear_coefficient if p.roof_shear_coefficient is None
@@ -494,6 +493,33 @@ def roof_thickness(case: Case) -> float:
         raise CaseError(f"popbal.{name} = {given!r}: the roof layer ({thickness:.4g} m thick) would fill more than "
                         f"half the slag height geometry.height = {g.height:g} m")
     return thickness
+
+
+def channel_efficiency(case: Case, channel_radius: float) -> float:
+    """The plume channel's collision efficiency E_ch [-] (popbal.closures): channel_collision_efficiency, or with
+    channel_collision_radius b collision_efficiency x max(1, (R_c / b)^2) (the droplets collide as if mixed over
+    the disk of radius b, or over the channel where it is narrower; spread_channel_collision_radius in place of b
+    where the plume spreads), else collision_efficiency. CaseError where the keys do not go together."""
+    p = case.popbal
+    if p.channel_collision_radius is not None and p.channel_collision_efficiency is not None:
+        raise CaseError(f"popbal.channel_collision_radius = {p.channel_collision_radius!r} m with "
+                        f"popbal.channel_collision_efficiency = {p.channel_collision_efficiency!r}: both set the "
+                        "channel's kernel; allowed: one of them")
+    if p.spread_channel_collision_radius is not None and (p.channel_collision_radius is None
+                                                          or p.spread_flux_reynolds is None):
+        raise CaseError(f"popbal.spread_channel_collision_radius = {p.spread_channel_collision_radius!r} m: the "
+                        "spread plume's collision radius; allowed only with popbal.channel_collision_radius and "
+                        "popbal.spread_flux_reynolds (or leave it out)")
+    if p.channel_collision_radius is None:
+        return p.collision_efficiency if p.channel_collision_efficiency is None else p.channel_collision_efficiency
+    if channel_radius == 0.0:
+        raise CaseError(f"popbal.channel_collision_radius = {p.channel_collision_radius!r} m: sets the kernel of a "
+                        "channel zone this case does not have; allowed only with popbal.channel_radius_factor > 0 "
+                        "(or leave it out)")
+    radius = p.channel_collision_radius
+    if p.spread_channel_collision_radius is not None and plume_spreads(case):
+        radius = p.spread_channel_collision_radius
+    return p.collision_efficiency * max(1.0, (channel_radius / radius) ** 2)  # mixed over min(b, R_c)
 
 
 def core_radius(case: Case, channel_radius: float | None = None) -> float | None:

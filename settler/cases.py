@@ -319,6 +319,18 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                                       "(popbal.closures; measured by analysis.calibration.hierarchy."
                                                       "channel_kernel_from_collisions); absent: "
                                                       "collision_efficiency.", 0.0, optional=True),
+        "channel_collision_radius": Field(F, "m", "b: the radius of the disk over which the plume channel's droplets, "
+                                                  "mixed, would collide as often as they do cell by cell "
+                                                  "(analysis.channel_clustering); the channel's efficiency is then "
+                                                  "collision_efficiency x max(1, (R_c / b)^2): its droplets collide "
+                                                  "as if mixed over the disk of radius b, or over the channel where "
+                                                  "R_c is narrower (popbal.closures); not with "
+                                                  "channel_collision_efficiency; absent: that.", 0.0,
+                                          exclusive_minimum=True, optional=True),
+        "spread_channel_collision_radius": Field(F, "m", "b_s: channel_collision_radius where the plume spreads "
+                                                         "(spread_flux_reynolds; needs channel_collision_radius, the "
+                                                         "compact plume's).", 0.0, exclusive_minimum=True,
+                                                 optional=True),
         "roof_shear_coefficient": Field(F, "-", "The roof layer's shear rate G in units of u_L / delta, the layer's "
                                                 "drainage velocity over its thickness (popbal.closures); absent: "
                                                 "shear_coefficient.", 0.0, optional=True),

@@ -543,7 +543,7 @@ def test_cell_efficiency_is_the_kernel_runs_merges_over_its_cell_by_cell_collisi
     assert got["merges"] == 100 and got["expected_collisions"] == 125.0 and got["form"] == "cell"
     assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution", "zones_floor",
                                                                                     "zones_line", "zones_drain",
-                                                                                    "zones_core"]
+                                                                                    "zones_core", "zones_stir"]
 
 
 def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
@@ -919,12 +919,16 @@ def test_a_layer_names_the_reference_set_engine_it_was_fitted_to():
     assert fitted_set_engine("0" * 40, root) is None
 
 
-def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_level_alone(tmp_path, monkeypatch):
+@pytest.mark.parametrize("closures", ["zones_core", "zones_stir"])
+def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_level_alone(closures, tmp_path,
+                                                                                         monkeypatch):
     """'zones_core': no transport level (the plume laws as derived: channel_coefficient and return_flow_ratio 1,
     the shear coefficient as defined, 1); the whole level fits the compact slag core R_0 and the channel's radius
     factor, neither of which the fixed values may override; the floor's f_b is measured at the fit's start radii; the spread core's
     share is measured (stubbed here) with R_0 at its start; the layer is valid TOML that writes the 'inlet' form,
-    the fitted radius factor and the measured share once each."""
+    the fitted radius factor and the measured share once each. 'zones_stir' fits the uniform turn's share with them
+    and holds the channel's collision radii and the outer stirring measured (stubbed) at the start radii, with the
+    spread share in place; the layer writes each once, with its unit, and they enter the bands' values."""
     import tomllib
 
     import analysis.calibration.hierarchy as h
@@ -947,7 +951,8 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
         names = list(parameters)
         assert start == {n: h.START[n] for n in names}
         return LevelFit(level=level, runs=list(case_files), parameters=names,
-                        estimates={"plume_core_radius": 0.01, "channel_radius_factor": 0.45},
+                        estimates={"plume_core_radius": 0.01, "channel_radius_factor": 0.45,
+                                   "bottom_turning_share": 0.2},
                         standard_errors={n: 0.001 for n in names}, correlation=np.eye(len(names)), discrepancy=0.0,
                         chi2=1.0, residual_count=8, evaluations=3, status="converged", errors={},
                         gate={"passed": True, "reasons": []})
@@ -968,12 +973,26 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
                                                                "drainage_per_run": {r: 2.5 for r in runs}})
     monkeypatch.setattr(h, "roof_kernel_from_collisions", lambda runs, d, thickness: {
         "efficiency": 1.9, "shear_coefficient": 3.0, "per_run": {}, "runs": list(runs)})
+    stir_at = {}
+
+    def radii(runs, d, fixed):
+        stir_at.update(fixed)
+        return {"compact": {"value": 0.006, "standard_error": 0.0004, "runs": ["a"]},
+                "spread": {"value": 0.014, "standard_error": 0.0001, "runs": ["b"]}, "censored": [],
+                "no_snapshot": [], "per_run": {r: {"collision_radius": 0.006, "clustering": 2.5} for r in runs}}
+
+    monkeypatch.setattr(h, "collision_radius_from_clustering", radii)
+    monkeypatch.setattr(h, "dispersion_from_suspension", lambda runs, d: {
+        "value": 4.8e-4, "standard_error": 2e-5, "runs": ["b"], "undetermined": ["a"], "no_snapshot": [],
+        "per_run": {"a": (math.nan, math.nan), "b": (4.8e-4, 2e-5)}})
     monkeypatch.setattr(h, "spread_share_from_groups", spread)
     monkeypatch.setattr(h, "load_target", lambda run, d, seed: run)
     monkeypatch.setattr(h, "fit_level", fit_level)
-    result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures="zones_core")
+    result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures=closures)
     assert list(fixed_at) == ["whole"]
-    assert [f.parameters for f in result.levels] == [["plume_core_radius", "channel_radius_factor"]]
+    fitted = ["plume_core_radius", "channel_radius_factor"] + (["bottom_turning_share"] if closures == "zones_stir"
+                                                               else [])
+    assert [f.parameters for f in result.levels] == [fitted]
     whole = fixed_at["whole"]
     assert not {"popbal.channel_radius_factor", "popbal.plume_core_radius"} & set(whole)
     assert whole["popbal.channel_radius_form"] == "inlet" and whole["popbal.channel_coefficient"] == 1.0
@@ -985,6 +1004,20 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
     assert popbal["channel_radius_form"] == "inlet" and popbal["channel_radius_factor"] == 0.45
     assert popbal["plume_core_radius"] == 0.01 and popbal["spread_core_share"] == 0.42
     assert popbal["plume_core_column_share"] == 0.62 and popbal["spread_flux_reynolds"] == 0.66
+    stirred = {"channel_collision_radius": 0.006, "spread_channel_collision_radius": 0.014, "outer_dispersion": 4.8e-4}
+    if closures == "zones_core":
+        assert not stir_at and result.stir is None and not set(stirred) & set(popbal)
+        assert popbal["bottom_turning_share"] == 0.06 and "bottom_turning_form" not in popbal
+        return
+    assert stir_at["popbal.plume_core_radius"] == 0.0095 and stir_at["popbal.channel_radius_factor"] == 0.5
+    assert stir_at["popbal.spread_core_share"] == 0.42
+    assert {k: whole[f"popbal.{k}"] for k in stirred} == stirred == {k: popbal[k] for k in stirred}
+    assert {k: result.values[k][0] for k in stirred} == stirred  # measured: into the bands
+    assert popbal["bottom_turning_share"] == 0.2 and popbal["bottom_turning_form"] == "uniform"
+    text = (tmp_path / "core.toml").read_text()
+    assert all(text.count(f"\n{k} = ") == 1 for k in stirred)
+    assert "channel_collision_radius = 0.006  # m [derived]" in text and "outer_dispersion = 0.00048  # m^2/s" in text
+    assert "outer stirring from the suspensions: D = 0.00048 +- 2e-05 m^2/s" in result.summary()
 
 
 def test_the_spread_core_share_is_measured_in_the_runs_the_regime_rule_spreads():

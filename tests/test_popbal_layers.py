@@ -340,15 +340,16 @@ def test_roof_kernel_keys_scale_the_roof_layers_merges_alone():
     assert (two - no_shear) / (one - no_shear) == pytest.approx(2.0, rel=0.02)
 
 
+EARLY_CHANNEL = ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6", "popbal.channel_feed_fraction=0.5",
+                 "reaction.enabled=false", "popbal.collision_efficiency=1", "popbal.shear_coefficient=0.5",
+                 "popbal.end_time=1.0", "popbal.output_interval=1.0"]
+
+
 def _early_channel_merges(extra):
     """The merges per zone after 1 s of the demo's feed, half into its plume channel and half spread over the outer
     zone (no layers; coalescence on, reaction off): early, so that merging has not yet changed what the zones hold
     much, and the outer zone merges its own feed."""
-    model = popbal.setup("demo", ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
-                                  "popbal.channel_feed_fraction=0.5",
-                                  "reaction.enabled=false", "popbal.collision_efficiency=1",
-                                  "popbal.shear_coefficient=0.5", "popbal.end_time=1.0",
-                                  "popbal.output_interval=1.0"] + extra)
+    model = popbal.setup("demo", EARLY_CHANNEL + extra)
     result = popbal.run(model, progress=False)
     return np.asarray(result.arrays["merges"][-1], dtype=float).sum(axis=1), result  # per zone
 
@@ -370,6 +371,44 @@ def test_channel_efficiency_without_a_channel_is_refused():
     with pytest.raises(CaseError, match="popbal.channel_collision_efficiency = 2.0: sets the kernel of a channel zone this case"):
         popbal.setup("demo", ["popbal.channel_radius_factor=0", "popbal.channel_feed_fraction=0",
                               "popbal.channel_collision_efficiency=2"])
+
+
+def test_a_collision_radius_mixes_the_channels_droplets_over_the_narrower_of_it_and_the_channel():
+    """popbal.channel_collision_radius b: the channel merges as with channel_collision_efficiency = E (R_c / b)^2
+    where b < R_c (the same run bit for bit: the droplets mixed over pi b^2 instead of pi R_c^2) and at E where
+    b >= R_c (the droplets fill the channel: the run without the key, bit for bit)."""
+    radius = popbal.setup("demo", EARLY_CHANNEL).channel_radius
+    b = radius / math.sqrt(2.0)  # (R_c / b)^2 = 2 at collision_efficiency 1
+    _, by_radius = _early_channel_merges([f"popbal.channel_collision_radius={b!r}"])
+    _, by_efficiency = _early_channel_merges([f"popbal.channel_collision_efficiency={(radius / b) ** 2!r}"])
+    assert np.array_equal(by_radius.arrays["number_density"], by_efficiency.arrays["number_density"])
+    _, wide = _early_channel_merges([f"popbal.channel_collision_radius={2.0 * radius!r}"])
+    _, reference = _early_channel_merges([])
+    assert np.array_equal(wide.arrays["number_density"], reference.arrays["number_density"])
+
+
+def test_the_spread_collision_radius_applies_where_the_plume_spreads_alone():
+    """spread_channel_collision_radius replaces channel_collision_radius in the spread regime only (zones_core's
+    rule: simple spreads, the demo does not), E_ch = E (R_c / b)^2 with the layer's E."""
+    keys = ["case.calibration=zones_core", "popbal.channel_collision_radius=0.006",
+            "popbal.spread_channel_collision_radius=0.014"]
+    for case, b in (("demo", 0.006), ("simple", 0.014)):
+        model = popbal.setup(case, keys)
+        assert model.channel_radius > b
+        assert model.parameters["channel_efficiency"] == pytest.approx(
+            model.parameters["efficiency"] * (model.channel_radius / b) ** 2, rel=1e-12)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["popbal.channel_collision_radius=0.006", "popbal.channel_collision_efficiency=1"],
+     "popbal.channel_collision_radius = 0.006 m with popbal.channel_collision_efficiency = 1.0: both set"),
+    (["popbal.spread_channel_collision_radius=0.01"],
+     "popbal.spread_channel_collision_radius = 0.01 m: the spread plume's collision radius; allowed only with"),
+    (["popbal.channel_radius_factor=0", "popbal.channel_feed_fraction=0", "popbal.channel_collision_radius=0.006"],
+     "popbal.channel_collision_radius = 0.006 m: sets the kernel of a channel zone this case does not have")])
+def test_collision_radii_that_do_not_go_together_are_refused(extra, message):
+    with pytest.raises(CaseError, match=message):
+        popbal.setup("demo", extra)
 
 
 def _early_bottom_merges(extra):

@@ -34,8 +34,9 @@ import numpy as np
 from .fit import LevelFit, fit_level
 from .registry import Registry, refuse_holdouts
 from .targets import TARGET_COLUMNS, load_target, seed_scatter
-from .zones import (ROOF_RESOLVED_CELL, dilution_from_zones, law_roof_thickness, radius_factor_from_zones,
-                    roof_from_zones, roof_kernel_from_collisions, spread_share_from_groups)
+from .zones import (ROOF_RESOLVED_CELL, collision_radius_from_clustering, dilution_from_zones,
+                    dispersion_from_suspension, law_roof_thickness, radius_factor_from_zones, roof_from_zones,
+                    roof_kernel_from_collisions, spread_share_from_groups)
 
 #: What each fitted level fits ([popbal] keys) and from where it starts.
 LEVEL_PARAMETERS = {"transport": ("channel_coefficient", "return_flow_ratio"),
@@ -65,6 +66,16 @@ CORE = {"popbal.confinement": True, "popbal.plume_law": "line_force", "popbal.ch
         "popbal.return_flow_ratio": 1.0, "popbal.entrainment_length": 1.12, "popbal.turning_length": 0.54,
         "popbal.bottom_turning_share": 0.06, "popbal.plume_core_column_share": 0.62,
         "popbal.spread_flux_reynolds": 0.66}
+#: 'zones_stir' (added 2026-12-07, before any fit under the second registration and before either of its blind
+#: hold-outs was run through popbal): 'zones_core' with the turn above the bottom layer uniform over the sizes
+#: (popbal.bottom_turning_form) and its share T fitted with R_0 and the channel's width, the outer zone stirred at
+#: the D_e the whole runs' suspensions measure (:func:`analysis.calibration.zones.dispersion_from_suspension`) and
+#: the channel's droplets colliding as if mixed over the collision radius b that the whole runs' plumes measure, one
+#: per regime (:func:`analysis.calibration.zones.collision_radius_from_clustering`), where 'zones_core' mixes them
+#: over the channel: the five compact demo runs' plumes merge 1.8-3.1 times more often than that (docs/guide/
+#: reduced-model.md, "the plume core's clustering").
+STIR = {**{k: v for k, v in CORE.items() if k != "popbal.bottom_turning_share"},
+        "popbal.bottom_turning_form": "uniform"}
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers": {"levels": LAYER_LEVELS, "layers": True},
             "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": BUSY},
@@ -86,7 +97,11 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "zones_core": {"levels": {"whole": ("plume_core_radius", "channel_radius_factor")},
                            "layers": True, "switches": CORE, "form": {"popbal.channel_radius_form": "inlet"},
                            "roof_kernel": True, "cell_efficiency": True, "floor": True, "drainage": True,
-                           "spread": True}}
+                           "spread": True},
+            "zones_stir": {"levels": {"whole": ("plume_core_radius", "channel_radius_factor", "bottom_turning_share")},
+                           "layers": True, "switches": STIR, "form": {"popbal.channel_radius_form": "inlet"},
+                           "roof_kernel": True, "cell_efficiency": True, "floor": True, "drainage": True,
+                           "spread": True, "stir": True}}
 #: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
 #: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
 #: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
@@ -130,13 +145,17 @@ SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time
                 "popbal.turning_length": "the circulation's turning length measured there",
                 "popbal.bottom_turning_share": "the turn above the bottom layer that brings the demo's resolved "
                                                "families within 7 % in count at one value (probe, training runs)",
+                "popbal.bottom_turning_form": "the turn takes the same share of every size: the resolved demo's "
+                                              "turning and settling droplets have the same mean diameter (0.61 and "
+                                              "0.58 mm; popbal.closures)",
                 "popbal.plume_core_column_share": "the slag core's bound in a narrow column: deep's feed in its "
                                                   "20 mm column holds its axis at 0.62 (probe, training runs)",
                 "popbal.spread_flux_reynolds": "the regime boundary: compact at rho_s Q / (mu R_0) = 0.62 "
                                                "(demo_feed_double_fine, demo_visc_half_fine), spread at 0.70 "
                                                "(demo_wide_33) and above, R_0 = 9.5 mm; the midpoint"}
 START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
-         "bottom_layer_factor": 1.0, "plume_core_radius": 0.0095, "channel_radius_factor": 0.5}
+         "bottom_layer_factor": 1.0, "plume_core_radius": 0.0095, "channel_radius_factor": 0.5,
+         "bottom_turning_share": 0.15}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
 FORM = {"popbal.channel_radius_form": "flux"}
 #: Key of :attr:`Hierarchy.missing` for the registered hold-outs not stored (not a level: they do not stop the others
@@ -165,6 +184,7 @@ class Hierarchy:
     roof: dict | None = None  # the roof law from the zone diagnostics (roof_from_zones), with 'layers'
     floor: dict | None = None  # f_b from the floor layers (floor_layer.bottom_factor), with 'zones_floor'
     spread: dict | None = None  # the spread plume's core share (zones.spread_share_from_groups), with 'zones_core'
+    stir: dict | None = None  # {"radius", "dispersion"}: the channel's collision radii, D_e, with 'zones_stir'
     training_only: bool = False  # asked to score no hold-out (settler calibrate --training-only)
 
     def summary(self) -> str:
@@ -189,6 +209,8 @@ class Hierarchy:
                          + ", ".join(f"{r} {v['thickness'] * 1e3:.2g} mm / {v['channel_radius'] * 1e3:.3g} mm"
                                      for r, v in self.floor["per_run"].items()) + ")"
                          + (f"; no layer in {', '.join(self.floor['no_layer'])}" if self.floor["no_layer"] else ""))
+        if self.stir:
+            lines += _stir_lines(self.stir)
         for fit in self.levels:
             lines.append(f"level {fit.level}: runs {', '.join(fit.runs)}; chi2 {fit.chi2:.3g} for {fit.residual_count} "
                          f"residuals, discrepancy {fit.discrepancy:.3g}, {fit.evaluations} model runs ({fit.status})")
@@ -238,6 +260,28 @@ def cell_efficiency(run_folder) -> dict:
     merges = float(table[["merges_under_inlet", "merges_elsewhere"]].to_numpy().sum())
     return {"efficiency": result["efficiency"], "standard_error": result["standard_error"], "quadrature_error": 0.0,
             "merges": int(round(merges)), "expected_collisions": float(table["collisions"].sum()), "form": "cell"}
+
+
+def _stir_lines(stir: dict) -> list[str]:
+    """The summary's lines on 'zones_stir''s measured channel collision radii and outer stirring."""
+    r, d = stir["radius"], stir["dispersion"]
+    lines = []
+    for regime in ("compact", "spread"):
+        if r[regime] is not None:
+            lines.append(f"channel collision radius ({regime}) from the clustering: b = "
+                         f"{r[regime]['value'] * 1e3:.3g} +- {r[regime]['standard_error'] * 1e3:.2g} mm (per run "
+                         + ", ".join(f"{run} {r['per_run'][run]['collision_radius'] * 1e3:.3g} mm, S "
+                                     f"{r['per_run'][run]['clustering']:.3g}" for run in r[regime]["runs"]) + ")")
+    if r["censored"]:
+        lines.append("  S <= 1, not pooled: " + ", ".join(f"{run} (S {r['per_run'][run]['clustering']:.3g})"
+                                                          for run in r["censored"]))
+    lines.append(f"outer stirring from the suspensions: D = {d['value']:.3g} +- {d['standard_error']:.2g} m^2/s (from "
+                 + ", ".join(f"{run} {d['per_run'][run][0]:.3g} +- {d['per_run'][run][1]:.2g}" for run in d["runs"])
+                 + (f"; undetermined in {', '.join(d['undetermined'])}" if d["undetermined"] else "") + ")")
+    skipped = sorted(set(r["no_snapshot"]) | set(d["no_snapshot"]))
+    if skipped:
+        lines.append(f"  no droplet snapshot stored, not measured: {', '.join(skipped)}")
+    return lines
 
 
 def _radius_line(k_r: dict) -> str:
@@ -340,8 +384,22 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
         spread = spread_share_from_groups(whole_runs, reference_dir, {**fixed, "popbal.plume_core_radius":
                                                                       START["plume_core_radius"]})
         fixed["popbal.spread_core_share"] = spread["value"]
+    stir = None
+    if CLOSURES[closures].get("stir"):  # the whole runs' snapshots, at the fit's start radii
+        whole_runs = _stored(registry.levels.get("whole", ()), reference_dir)[0]
+        refuse_holdouts(whole_runs, registry, "the channel's collision radius and the stirring")
+        start = {f"popbal.{n}": START[n] for n in ("plume_core_radius", "channel_radius_factor")}
+        stir = {"radius": collision_radius_from_clustering(whole_runs, reference_dir, {**fixed, **start}),
+                "dispersion": dispersion_from_suspension(whole_runs, reference_dir)}
+        measured = [("channel_collision_radius", stir["radius"]["compact"]),
+                    ("spread_channel_collision_radius", stir["radius"]["spread"]),
+                    ("outer_dispersion", stir["dispersion"])]
+        for key, found in measured:
+            if found is not None:  # no spread run: no spread radius (the compact one everywhere)
+                fixed[f"popbal.{key}"] = found["value"]
+                values[key] = (found["value"], found["standard_error"])  # measured: into the bands
     return {"fixed": fixed, "values": values, "collision": collision, "radius_factor": k_r, "roof": roof,
-            "transport_runs": transport_runs, "missing": missing, "spread": spread}
+            "transport_runs": transport_runs, "missing": missing, "spread": spread, "stir": stir}
 
 
 def calibrate_set(registry: Registry, reference_dir: str | Path = "data/reference", max_evaluations: int = 30,
@@ -413,7 +471,8 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
                      missing={k: v for k, v in missing.items() if v}, coverage=coverage_result, closures=closures,
-                     roof=roof, floor=floor, spread=measured["spread"], training_only=training_only)
+                     roof=roof, floor=floor, spread=measured["spread"], stir=measured["stir"],
+                     training_only=training_only)
 
 
 def _band_means(target, case_file, fixed, values):

@@ -106,6 +106,19 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
         lines.append(f"spread_core_share = {sp['value']!r}  # - [derived] the geometric mean of R* / R over the "
                      f"whole runs the regime rule spreads, {', '.join(sp['runs'])} (plume_force.csv), standard error "
                      f"{sp['standard_error']:.3g}")
+    if result.stir:
+        r, d = result.stir["radius"], result.stir["dispersion"]
+        for key, regime in (("channel_collision_radius", "compact"), ("spread_channel_collision_radius", "spread")):
+            if r[regime] is not None:
+                lines.append(f"{key} = {r[regime]['value']!r}  # m [derived] the geometric mean of the collision "
+                             f"radius R_eq / sqrt(S) over the {regime} whole runs {', '.join(r[regime]['runs'])} "
+                             f"(analysis.channel_clustering at the fit's start radii), standard error "
+                             f"{r[regime]['standard_error']:.3g}"
+                             + (f"; S <= 1, not pooled: {', '.join(r['censored'])}"
+                                if regime == "compact" and r["censored"] else ""))
+        lines.append(f"outer_dispersion = {d['value']!r}  # m^2/s [derived] the inverse-variance mean of 1 / D_e "
+                     f"over {', '.join(d['runs'])} (analysis.suspension), standard error {d['standard_error']:.3g}"
+                     + (f"; undetermined in {', '.join(d['undetermined'])}" if d["undetermined"] else ""))
     for key, value in CLOSURES[result.closures].get("form", FORM).items():
         lines.append(f"{key.split('.', 1)[1]} = {_q(value)}  # [chosen] the closure form of every level")
     for key, value in CLOSURES[result.closures].get("switches", {}).items():

@@ -390,3 +390,93 @@ def spread_share_from_groups(runs, reference_dir: str | Path, fixed: dict) -> di
     se = float(np.std(logs, ddof=1) / math.sqrt(len(logs))) if len(logs) > 1 else math.nan
     value = float(np.exp(logs.mean()))
     return {"value": value, "standard_error": value * se, "per_run": shares, "runs": list(shares)}
+
+
+def _with_snapshots(runs, reference_dir) -> tuple[list[str], list[str]]:
+    """(the ``runs`` that store a droplet snapshot, those that store none): the measures of droplets' positions take
+    the former and name the latter."""
+    from analysis.runs import load_run
+
+    have = [r for r in runs if len(load_run(Path(reference_dir) / r).snapshot_times())]
+    return have, [r for r in runs if r not in have]
+
+
+def collision_radius_from_clustering(runs, reference_dir: str | Path, fixed: dict) -> dict:
+    """The plume channel's collision radius b [m] per regime (popbal.channel_collision_radius and
+    spread_channel_collision_radius): per run :mod:`analysis.channel_clustering`'s interior collision radius over the
+    grid columns within popbal's channel radius R_c under ``fixed`` ({dotted key: value}, on the run's own case.toml
+    with its calibration layer set aside; :func:`popbal.model.channel_closure`), the runs split by popbal's regime
+    rule (:func:`popbal.model.plume_spreads`) and each regime's geometric mean with its standard error (that of the
+    mean log, NaN from one run). A run whose clustering S is at most 1 (its droplets fill the disk: b is at least the
+    disk's radius, all it tells; popbal's channel then merges at collision_efficiency) is "censored", not pooled. Returns {"compact": {...}, "spread": {...} or None, "per_run": {run: {"regime",
+    "collision_radius", "clustering", "channel_radius", "equivalent_radius"}}, "no_snapshot": [runs that store no
+    droplet snapshot, left out], "censored": [runs]}; ValueError where no compact run is pooled."""
+    from analysis.channel_clustering import interior, measure_clustering
+    from popbal.model import channel_closure, plume_spreads
+    from settler.cases import NO_CALIBRATION, load_case
+
+    per_run = {}
+    runs, unmeasured = _with_snapshots(runs, reference_dir)
+    for run in runs:
+        folder = Path(reference_dir) / run
+        case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION,
+                                                 **{k: v for k, v in fixed.items() if k.startswith("popbal.")}})
+        radius = channel_closure(case)[0]
+        table, _ = measure_clustering(folder, radius)
+        measured = interior(table)
+        per_run[run] = {"regime": "spread" if plume_spreads(case) else "compact", "channel_radius": radius,
+                        "collision_radius": measured["collision_radius"], "clustering": measured["clustering"],
+                        "equivalent_radius": table.attrs["radius"]}
+    # S <= 1: the droplets fill the disk, so b is at least its radius and no more is known (popbal's E_ch is then E)
+    censored = [r for r, v in per_run.items() if not v["clustering"] > 1.0]
+
+    def pooled(regime):
+        radii = {r: v["collision_radius"] for r, v in per_run.items() if v["regime"] == regime and r not in censored}
+        if not radii:
+            return None
+        logs = np.log(list(radii.values()))
+        value = float(np.exp(logs.mean()))
+        se = float(np.std(logs, ddof=1) / math.sqrt(len(logs))) if len(logs) > 1 else math.nan
+        return {"value": value, "standard_error": value * se, "runs": list(radii)}
+
+    compact = pooled("compact")
+    if compact is None:
+        raise ValueError(f"no run of {', '.join(runs) or 'none'} is compact by the regime rule: the channel's "
+                         "collision radius cannot be measured")
+    return {"compact": compact, "spread": pooled("spread"), "per_run": per_run, "no_snapshot": unmeasured,
+            "censored": censored}
+
+
+#: Largest relative standard error [-] of a run's stirring diffusivity D_e for it to count in the pooled value: the
+#: identifiability gate's own limit. [chosen]
+DISPERSION_MAX_ERROR = 0.5
+
+
+def dispersion_from_suspension(runs, reference_dir: str | Path) -> dict:
+    """The outer zone's stirring D [m^2/s] (popbal.outer_dispersion) from :mod:`analysis.suspension`: per run the
+    size classes' concentration profiles away from the axis fitted as one stirred suspension, k = k0 + U / D_e
+    (:func:`analysis.suspension.settling_fit`); the runs whose 1 / D_e is determined (relative standard error below
+    :data:`DISPERSION_MAX_ERROR`) pooled by the inverse-variance mean of 1 / D_e, the fitted coefficient. Returns
+    {"value", "standard_error", "runs" (pooled), "per_run": {run: (D_e, its standard error)}, "undetermined",
+    "no_snapshot" (left out)}; ValueError where no run determines it."""
+    from analysis.suspension import measure_suspension, settling_fit
+
+    per_run, undetermined, inverse, weight = {}, [], [], []
+    runs, unmeasured = _with_snapshots(runs, reference_dir)
+    for run in runs:
+        fit = settling_fit(measure_suspension(Path(reference_dir) / run)[0])
+        d, se = fit["diffusivity"], fit["diffusivity_error"]
+        per_run[run] = (d, se)
+        if math.isfinite(d) and math.isfinite(se) and se < DISPERSION_MAX_ERROR * d:
+            inverse.append(1.0 / d)
+            weight.append((d * d / se) ** 2)  # 1 / se(1 / D)^2, se(1 / D) = se(D) / D^2
+        else:
+            undetermined.append(run)
+    if not inverse:
+        raise ValueError(f"no run of {', '.join(runs) or 'none'} determines the stirring diffusivity (relative "
+                         f"standard error below {DISPERSION_MAX_ERROR:g}): it cannot be measured")
+    mean = float(np.average(inverse, weights=weight))
+    se_inverse = 1.0 / math.sqrt(float(np.sum(weight)))
+    return {"value": 1.0 / mean, "standard_error": se_inverse / mean**2, "per_run": per_run,
+            "runs": [r for r in runs if r not in undetermined], "undetermined": undetermined,
+            "no_snapshot": unmeasured}
