@@ -340,8 +340,8 @@ def test_roof_kernel_keys_scale_the_roof_layers_merges_alone():
     assert (two - no_shear) / (one - no_shear) == pytest.approx(2.0, rel=0.02)
 
 
-EARLY_CHANNEL = ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6", "popbal.channel_feed_fraction=0.5",
-                 "reaction.enabled=false", "popbal.collision_efficiency=1", "popbal.shear_coefficient=0.5",
+EARLY_CHANNEL = ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
+                 "popbal.channel_feed_fraction=0.5", "reaction.enabled=false", "popbal.collision_efficiency=1", "popbal.shear_coefficient=0.5",
                  "popbal.end_time=1.0", "popbal.output_interval=1.0"]
 
 

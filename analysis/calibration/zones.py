@@ -408,7 +408,8 @@ def collision_radius_from_clustering(runs, reference_dir: str | Path, fixed: dic
     with its calibration layer set aside; :func:`popbal.model.channel_closure`), the runs split by popbal's regime
     rule (:func:`popbal.model.plume_spreads`) and each regime's geometric mean with its standard error (that of the
     mean log, NaN from one run). A run whose clustering S is at most 1 (its droplets fill the disk: b is at least the
-    disk's radius, all it tells; popbal's channel then merges at collision_efficiency) is "censored", not pooled. Returns {"compact": {...}, "spread": {...} or None, "per_run": {run: {"regime",
+    disk's radius, all it tells; popbal's channel then merges at collision_efficiency) is "censored", not pooled.
+    Returns {"compact": {"value", "standard_error", "runs"}, "spread": the same or None, "per_run": {run: {"regime",
     "collision_radius", "clustering", "channel_radius", "equivalent_radius"}}, "no_snapshot": [runs that store no
     droplet snapshot, left out], "censored": [runs]}; ValueError where no compact run is pooled."""
     from analysis.channel_clustering import interior, measure_clustering
