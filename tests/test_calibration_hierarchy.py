@@ -1031,3 +1031,38 @@ def test_the_spread_core_share_is_measured_in_the_runs_the_regime_rule_spreads()
     assert got["runs"] == ["simple"] and got["value"] == pytest.approx(47.4 / 112.8, rel=5e-3)
     with pytest.raises(ValueError, match="no run of demo_cell_25 is spread"):
         spread_share_from_groups(["demo_cell_25"], "data/reference", fixed)
+
+
+def test_a_holdouts_band_runs_popbal_at_each_parameter_draw_not_at_the_estimates(tmp_path, monkeypatch):
+    """_score_holdouts: every fitted and measured value is in ``fixed``, which popbal's runs apply after the drawn
+    values (fit.reduced_series); the draws must still reach popbal. With E = 1.0 +- 0.2 and no discrepancy, a model
+    whose window means are E itself gives a 90 % band 2 x 1.645 x 0.2 = 0.658 wide (200 draws: within 20 %), where
+    the estimates alone give a band of width 0; the point errors stay those at the estimates."""
+    import types
+
+    import analysis.calibration.fit as fit_module
+    import analysis.calibration.hierarchy as h
+    from analysis.calibration.fit import LevelFit
+    from analysis.calibration.registry import Registry
+
+    (tmp_path / "held").mkdir()
+    (tmp_path / "held" / "timeseries.csv").write_text("time\n0\n")
+    registry = Registry(holdouts=("held",), why={}, families={}, path=tmp_path / "holdouts.toml", levels={})
+    target = types.SimpleNamespace(name="held", means=dict.fromkeys(h.TARGET_COLUMNS, 1.0), window=(0.0, 1.0))
+    monkeypatch.setattr(h, "load_target", lambda run, d, seed: target)
+
+    def fake_means(target, case_file, values, fixed):  # applied as fit.reduced_series applies them
+        effective = {**{f"popbal.{k}": float(v) for k, v in values.items()}, **(fixed or {})}
+        return dict.fromkeys(h.TARGET_COLUMNS, effective["popbal.collision_efficiency"])
+
+    monkeypatch.setattr(fit_module, "reduced_means", fake_means)
+    level = LevelFit(level="whole", runs=["a"], parameters=["plume_core_radius"], estimates={"plume_core_radius": 0.01},
+                     standard_errors={"plume_core_radius": 0.001}, correlation=np.eye(1), discrepancy=0.0, chi2=1.0,
+                     residual_count=4, evaluations=1, status="", errors={})
+    values = {"collision_efficiency": (1.0, 0.2), "plume_core_radius": (0.01, 0.001), "outer_dispersion": (5e-4, 1e-4)}
+    fixed = {"popbal.collision_efficiency": 1.0, "popbal.plume_core_radius": 0.01, "popbal.outer_dispersion": 5e-4,
+             "popbal.confinement": True}
+    errors, result = h._score_holdouts(registry, tmp_path, {}, fixed, values, [level], 200)
+    assert errors["held"] == dict.fromkeys(h.TARGET_COLUMNS, 0.0)
+    low, _, high = result["bands"]["held"]["droplet_count"]
+    assert high - low == pytest.approx(2.0 * 1.645 * 0.2, rel=0.2) and low < 1.0 < high

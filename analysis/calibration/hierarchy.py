@@ -502,6 +502,10 @@ def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, sample
             covariance[i, i] = values[key][1] ** 2
     delta = max(fit.discrepancy for fit in levels)
     draws = parameter_samples(estimates, covariance, keys, samples, seed=1)
+    # the draws replace the estimates: ``fixed`` holds every fitted and measured value and is applied after the
+    # values (fit.reduced_series), so left in it would override each draw (until 2026-12-07 the bands varied by the
+    # discrepancy alone: zones_core's stored band_coverage is that of the discrepancy term)
+    drawn = {k: v for k, v in fixed.items() if k.removeprefix("popbal.") not in keys}
     errors, bands, observed = {}, {}, {}
     for run in _stored(registry.holdouts, reference_dir)[0]:
         target = load_target(run, reference_dir, seed)
@@ -510,7 +514,7 @@ def _score_holdouts(registry, reference_dir, seed, fixed, values, levels, sample
         errors[run] = {c: means[c] / target.means[c] - 1.0 for c in TARGET_COLUMNS}
         if samples == 0:
             continue
-        bands[run] = band(functools.partial(_band_means, target, case_file, fixed), draws, delta, seed=1,
+        bands[run] = band(functools.partial(_band_means, target, case_file, drawn), draws, delta, seed=1,
                           pool=pool)
         observed[run] = dict(target.means)
     if samples == 0:
