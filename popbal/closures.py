@@ -254,7 +254,9 @@ takes E_ch = E max(1, (R_c / b)^2): its droplets collide as if mixed over pi b^2
 narrower, and its collisions do not depend on the channel radius a fit takes. On the second registration's training
 runs at R_c 9.5 mm (zones_core's start): b 5.3-7.0 mm in the five compact demo runs (S 1.8-3.1), 14.0-14.2 mm in
 simple and cubic at 37.5 mm (S 6.7-7.0), the regime's own b; deep_w002's 5 mm channel (12 columns) gives S 0.07,
-its droplets fill the disk (2026-12-07, docs/guide/reduced-model.md).
+which the law (E_ch >= E) cannot carry: there the channel merges at E. b shrinks with the cell (8.0 / 6.6 / 5.3 mm
+at 5 / 3.3 / 2.5 mm cells in the demo's grid study): the full engine's plume core is not grid-converged (2026-12-07,
+docs/guide/reduced-model.md).
 
 The bottom layer's lift into the return flow (``bottom_lift_share`` lambda, ``bottom_lift_velocity_ratio`` beta).
 Resolved, the floor does give droplets back. The demo at 2.5 mm cells, continued from its stored 25 s run to 60 s

@@ -978,7 +978,8 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
     def radii(runs, d, fixed):
         stir_at.update(fixed)
         return {"compact": {"value": 0.006, "standard_error": 0.0004, "runs": ["a"]},
-                "spread": {"value": 0.014, "standard_error": 0.0001, "runs": ["b"]}, "censored": [],
+                "spread": {"value": 0.014, "standard_error": 0.0001, "runs": ["b"]}, "excluded": [],
+                "with_excluded": None,
                 "no_snapshot": [], "per_run": {r: {"collision_radius": 0.006, "clustering": 2.5} for r in runs}}
 
     monkeypatch.setattr(h, "collision_radius_from_clustering", radii)

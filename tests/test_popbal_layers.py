@@ -341,8 +341,8 @@ def test_roof_kernel_keys_scale_the_roof_layers_merges_alone():
 
 
 EARLY_CHANNEL = ["popbal.channel_radius_form=flux", "popbal.channel_radius_factor=4.6",
-                 "popbal.channel_feed_fraction=0.5", "reaction.enabled=false", "popbal.collision_efficiency=1", "popbal.shear_coefficient=0.5",
-                 "popbal.end_time=1.0", "popbal.output_interval=1.0"]
+                 "popbal.channel_feed_fraction=0.5", "reaction.enabled=false", "popbal.collision_efficiency=1",
+                 "popbal.shear_coefficient=0.5", "popbal.end_time=1.0", "popbal.output_interval=1.0"]
 
 
 def _early_channel_merges(extra):

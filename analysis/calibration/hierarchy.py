@@ -68,12 +68,18 @@ CORE = {"popbal.confinement": True, "popbal.plume_law": "line_force", "popbal.ch
         "popbal.spread_flux_reynolds": 0.66}
 #: 'zones_stir' (added 2026-12-07, before any fit under the second registration and before either of its blind
 #: hold-outs was run through popbal): 'zones_core' with the turn above the bottom layer uniform over the sizes
-#: (popbal.bottom_turning_form) and its share T fitted with R_0 and the channel's width, the outer zone stirred at
-#: the D_e the whole runs' suspensions measure (:func:`analysis.calibration.zones.dispersion_from_suspension`) and
-#: the channel's droplets colliding as if mixed over the collision radius b that the whole runs' plumes measure, one
-#: per regime (:func:`analysis.calibration.zones.collision_radius_from_clustering`), where 'zones_core' mixes them
-#: over the channel: the five compact demo runs' plumes merge 1.8-3.1 times more often than that (docs/guide/
-#: reduced-model.md, "the plume core's clustering").
+#: (popbal.bottom_turning_form) and its share T fitted with R_0 and the channel's width (one T for both regimes),
+#: the outer zone stirred at the D_e the whole runs' suspensions measure
+#: (:func:`analysis.calibration.zones.dispersion_from_suspension`: only simple and cubic, the 0.2 m boxes, determine
+#: it, and their value stirs every box) and the channel's droplets colliding as if mixed over the collision radius b
+#: that the whole runs' plumes measure, one per regime
+#: (:func:`analysis.calibration.zones.collision_radius_from_clustering`), where 'zones_core' mixes them over the
+#: channel: the five compact demo runs' droplets collide 1.8-3.1 times more often than that (docs/guide/
+#: reduced-model.md). b is measured at 2.5 mm cells in the demos and shrinks with the cell (8.0 / 6.6 / 5.3 mm at
+#: 5 / 3.3 / 2.5 mm in the demo's grid study), an error its standard error leaves out. Two compact runs sit at a
+#: feed Reynolds number of 0.62 against the regime boundary 0.66: an R_0 below 8.9 mm spreads them, their channel
+#: widening from 9.5 to 18.8 mm and E_ch going from 2.3 E to 1.8 E (the fit's objective jumps there, as under
+#: 'zones_core', whose core jumps alike).
 STIR = {**{k: v for k, v in CORE.items() if k != "popbal.bottom_turning_share"},
         "popbal.bottom_turning_form": "uniform"}
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
@@ -272,9 +278,11 @@ def _stir_lines(stir: dict) -> list[str]:
                          f"{r[regime]['value'] * 1e3:.3g} +- {r[regime]['standard_error'] * 1e3:.2g} mm (per run "
                          + ", ".join(f"{run} {r['per_run'][run]['collision_radius'] * 1e3:.3g} mm, S "
                                      f"{r['per_run'][run]['clustering']:.3g}" for run in r[regime]["runs"]) + ")")
-    if r["censored"]:
-        lines.append("  S <= 1, not pooled: " + ", ".join(f"{run} (S {r['per_run'][run]['clustering']:.3g})"
-                                                          for run in r["censored"]))
+    if r["excluded"]:
+        lines.append("  S <= 1, not pooled (the law cannot carry S < 1): "
+                     + ", ".join(f"{run} (S {r['per_run'][run]['clustering']:.3g})" for run in r["excluded"])
+                     + (f"; the compact pool with them: b = {r['with_excluded']['value'] * 1e3:.3g} mm"
+                        if r["with_excluded"] else ""))
     lines.append(f"outer stirring from the suspensions: D = {d['value']:.3g} +- {d['standard_error']:.2g} m^2/s (from "
                  + ", ".join(f"{run} {d['per_run'][run][0]:.3g} +- {d['per_run'][run][1]:.2g}" for run in d["runs"])
                  + (f"; undetermined in {', '.join(d['undetermined'])}" if d["undetermined"] else "") + ")")

@@ -114,8 +114,9 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
                              f"radius R_eq / sqrt(S) over the {regime} whole runs {', '.join(r[regime]['runs'])} "
                              f"(analysis.channel_clustering at the fit's start radii), standard error "
                              f"{r[regime]['standard_error']:.3g}"
-                             + (f"; S <= 1, not pooled: {', '.join(r['censored'])}"
-                                if regime == "compact" and r["censored"] else ""))
+                             + (f"; S <= 1, not pooled: {', '.join(excluded)}"
+                                if (excluded := [x for x in r["excluded"] if r["per_run"][x]["regime"] == regime])
+                                else ""))
         lines.append(f"outer_dispersion = {d['value']!r}  # m^2/s [derived] the inverse-variance mean of 1 / D_e "
                      f"over {', '.join(d['runs'])} (analysis.suspension), standard error {d['standard_error']:.3g}"
                      + (f"; undetermined in {', '.join(d['undetermined'])}" if d["undetermined"] else ""))

@@ -406,33 +406,39 @@ def collision_radius_from_clustering(runs, reference_dir: str | Path, fixed: dic
     spread_channel_collision_radius): per run :mod:`analysis.channel_clustering`'s interior collision radius over the
     grid columns within popbal's channel radius R_c under ``fixed`` ({dotted key: value}, on the run's own case.toml
     with its calibration layer set aside; :func:`popbal.model.channel_closure`), the runs split by popbal's regime
-    rule (:func:`popbal.model.plume_spreads`) and each regime's geometric mean with its standard error (that of the
-    mean log, NaN from one run). A run whose clustering S is at most 1 (its droplets fill the disk: b is at least the
-    disk's radius, all it tells; popbal's channel then merges at collision_efficiency) is "censored", not pooled.
-    Returns {"compact": {"value", "standard_error", "runs"}, "spread": the same or None, "per_run": {run: {"regime",
+    rule (:func:`popbal.model.plume_spreads`) and each regime's geometric mean with its standard error (the mean log's
+    carried to b, b x se(ln b); NaN from one run). A run whose droplets collide no more often cell by cell than
+    mixed over the disk (S <= 1, or no pair: NaN) is "excluded", not pooled: popbal's law E_ch = E max(1, (R_c /
+    b)^2) cannot carry S < 1 (deep_w002's 5 mm channel, 12 columns, gives S 0.07); "with_excluded" is the compact
+    regime's pool with those whose b is finite, for comparison. Returns {"compact": {"value", "standard_error",
+    "runs"}, "spread": the same or None, "with_excluded": the same or None, "per_run": {run: {"regime",
     "collision_radius", "clustering", "channel_radius", "equivalent_radius"}}, "no_snapshot": [runs that store no
-    droplet snapshot, left out], "censored": [runs]}; ValueError where no compact run is pooled."""
+    droplet snapshot, left out], "excluded": [runs]}. ValueError where no compact run is pooled, or a run spreads
+    and no spread run is pooled (the compact b would then stand for a plume it was not measured in)."""
     from analysis.channel_clustering import interior, measure_clustering
     from popbal.model import channel_closure, plume_spreads
     from settler.cases import NO_CALIBRATION, load_case
 
-    per_run = {}
-    runs, unmeasured = _with_snapshots(runs, reference_dir)
+    per_run, regimes = {}, {}
+    measurable, unmeasured = _with_snapshots(runs, reference_dir)
     for run in runs:
         folder = Path(reference_dir) / run
         case = load_case(folder / "case.toml", {"case.calibration": NO_CALIBRATION,
                                                  **{k: v for k, v in fixed.items() if k.startswith("popbal.")}})
+        regimes[run] = "spread" if plume_spreads(case) else "compact"
+        if run not in measurable:
+            continue
         radius = channel_closure(case)[0]
         table, _ = measure_clustering(folder, radius)
         measured = interior(table)
-        per_run[run] = {"regime": "spread" if plume_spreads(case) else "compact", "channel_radius": radius,
+        per_run[run] = {"regime": regimes[run], "channel_radius": radius,
                         "collision_radius": measured["collision_radius"], "clustering": measured["clustering"],
                         "equivalent_radius": table.attrs["radius"]}
-    # S <= 1: the droplets fill the disk, so b is at least its radius and no more is known (popbal's E_ch is then E)
-    censored = [r for r, v in per_run.items() if not v["clustering"] > 1.0]
+    excluded = [r for r, v in per_run.items() if not v["clustering"] > 1.0]
 
-    def pooled(regime):
-        radii = {r: v["collision_radius"] for r, v in per_run.items() if v["regime"] == regime and r not in censored}
+    def pooled(regime, leave_out):
+        radii = {r: v["collision_radius"] for r, v in per_run.items()
+                 if v["regime"] == regime and r not in leave_out and math.isfinite(v["collision_radius"])}
         if not radii:
             return None
         logs = np.log(list(radii.values()))
@@ -440,12 +446,19 @@ def collision_radius_from_clustering(runs, reference_dir: str | Path, fixed: dic
         se = float(np.std(logs, ddof=1) / math.sqrt(len(logs))) if len(logs) > 1 else math.nan
         return {"value": value, "standard_error": value * se, "runs": list(radii)}
 
-    compact = pooled("compact")
+    compact, spread = pooled("compact", excluded), pooled("spread", excluded)
+    left = (f"; excluded (S <= 1): {', '.join(excluded) or 'none'}; no droplet snapshot: "
+            f"{', '.join(unmeasured) or 'none'}")
     if compact is None:
-        raise ValueError(f"no run of {', '.join(runs) or 'none'} is compact by the regime rule: the channel's "
-                         "collision radius cannot be measured")
-    return {"compact": compact, "spread": pooled("spread"), "per_run": per_run, "no_snapshot": unmeasured,
-            "censored": censored}
+        raise ValueError(f"no compact run of {', '.join(runs) or 'none'} gives the channel's collision radius (compact "
+                         f"by the regime rule: {', '.join(r for r in runs if regimes[r] == 'compact') or 'none'}"
+                         f"{left})")
+    spreading = [r for r in runs if regimes[r] == "spread"]
+    if spreading and spread is None:
+        raise ValueError(f"{', '.join(spreading)} spread by the regime rule, and none gives the spread plume's "
+                         f"collision radius{left}; the compact plume's would stand for it")
+    return {"compact": compact, "spread": spread, "with_excluded": pooled("compact", ()), "per_run": per_run,
+            "no_snapshot": unmeasured, "excluded": excluded}
 
 
 #: Largest relative standard error [-] of a run's stirring diffusivity D_e for it to count in the pooled value: the
@@ -457,7 +470,8 @@ def dispersion_from_suspension(runs, reference_dir: str | Path) -> dict:
     """The outer zone's stirring D [m^2/s] (popbal.outer_dispersion) from :mod:`analysis.suspension`: per run the
     size classes' concentration profiles away from the axis fitted as one stirred suspension, k = k0 + U / D_e
     (:func:`analysis.suspension.settling_fit`); the runs whose 1 / D_e is determined (relative standard error below
-    :data:`DISPERSION_MAX_ERROR`) pooled by the inverse-variance mean of 1 / D_e, the fitted coefficient. Returns
+    :data:`DISPERSION_MAX_ERROR`) pooled by the inverse-variance mean of 1 / D_e, the fitted coefficient, its
+    standard error widened by sqrt(chi^2 per degree of freedom) where the runs scatter more than that. Returns
     {"value", "standard_error", "runs" (pooled), "per_run": {run: (D_e, its standard error)}, "undetermined",
     "no_snapshot" (left out)}; ValueError where no run determines it."""
     from analysis.suspension import measure_suspension, settling_fit
@@ -468,7 +482,7 @@ def dispersion_from_suspension(runs, reference_dir: str | Path) -> dict:
         fit = settling_fit(measure_suspension(Path(reference_dir) / run)[0])
         d, se = fit["diffusivity"], fit["diffusivity_error"]
         per_run[run] = (d, se)
-        if math.isfinite(d) and math.isfinite(se) and se < DISPERSION_MAX_ERROR * d:
+        if math.isfinite(d) and math.isfinite(se) and 0.0 < se < DISPERSION_MAX_ERROR * d:
             inverse.append(1.0 / d)
             weight.append((d * d / se) ** 2)  # 1 / se(1 / D)^2, se(1 / D) = se(D) / D^2
         else:
@@ -478,6 +492,9 @@ def dispersion_from_suspension(runs, reference_dir: str | Path) -> dict:
                          f"standard error below {DISPERSION_MAX_ERROR:g}): it cannot be measured")
     mean = float(np.average(inverse, weights=weight))
     se_inverse = 1.0 / math.sqrt(float(np.sum(weight)))
+    if len(inverse) > 1:  # the runs scatter more than their own errors say: widen, as settling_fit does
+        chi2 = float(np.sum(np.asarray(weight) * (np.asarray(inverse) - mean) ** 2)) / (len(inverse) - 1)
+        se_inverse *= math.sqrt(max(chi2, 1.0))
     return {"value": 1.0 / mean, "standard_error": se_inverse / mean**2, "per_run": per_run,
             "runs": [r for r in runs if r not in undetermined], "undetermined": undetermined,
             "no_snapshot": unmeasured}
