@@ -928,7 +928,8 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
     share is measured (stubbed here) with R_0 at its start; the layer is valid TOML that writes the 'inlet' form,
     the fitted radius factor and the measured share once each. 'zones_stir' fits the uniform turn's share with them
     and holds the channel's collision radii and the outer stirring measured (stubbed) at the start radii, with the
-    spread share in place; the layer writes each once, with its unit, and they enter the bands' values."""
+    spread share in place; the layer writes each once, with its unit, and they enter the bands' values, also as a
+    band drawn from the written layer reads them (covariance_from_layer: each with its own variance)."""
     import tomllib
 
     import analysis.calibration.hierarchy as h
@@ -1016,9 +1017,17 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
     assert {k: result.values[k][0] for k in stirred} == stirred  # measured: into the bands
     assert popbal["bottom_turning_share"] == 0.2 and popbal["bottom_turning_form"] == "uniform"
     text = (tmp_path / "core.toml").read_text()
-    assert all(text.count(f"\n{k} = ") == 1 for k in stirred)
+    assert all(text.split("[provenance]")[0].count(f"\n{k} = ") == 1 for k in stirred)
     assert "channel_collision_radius = 0.006  # m [derived]" in text and "outer_dispersion = 0.00048  # m^2/s" in text
     assert "outer stirring from the suspensions: D = 0.00048 +- 2e-05 m^2/s" in result.summary()
+    from analysis.calibration.bands import covariance_from_layer
+
+    estimates, covariance, keys, _ = covariance_from_layer(tmp_path / "core.toml")
+    for key, se in (("channel_collision_radius", 0.0004), ("spread_channel_collision_radius", 0.0001),
+                    ("outer_dispersion", 2e-5), ("bottom_layer_factor", result.floor["standard_error"])):
+        i = keys.index(key)  # measured before the fit: drawn in the bands with its own variance
+        assert estimates[key] == result.values[key][0] and covariance[i, i] == pytest.approx(se**2, rel=1e-12)
+        assert not np.any(np.delete(covariance[i], i))
 
 
 def test_the_spread_core_share_is_measured_in_the_runs_the_regime_rule_spreads():

@@ -34,7 +34,9 @@ CURRENT_LAYER = "zones_core"
 def covariance_from_layer(path) -> tuple[dict[str, float], np.ndarray, list[str], float]:
     """(estimates {key: value}, covariance (p, p), keys in its order, the largest level discrepancy delta [-]) of
     a hierarchical calibration layer: the collision level's E with its standard error, each fitted level's
-    estimates, standard errors and correlations (block-diagonal between levels)."""
+    estimates, standard errors and correlations (block-diagonal between levels), and the values measured before the
+    fit with their standard errors where the layer records them ([provenance.measured], each its own block; a
+    layer written before 2026-12-07 has none)."""
     layer = tomllib.loads(Path(path).read_text(encoding="utf-8"))
     provenance = layer.get("provenance", {})
     collision = provenance.get("collision")
@@ -56,6 +58,11 @@ def covariance_from_layer(path) -> tuple[dict[str, float], np.ndarray, list[str]
             keys.append(n)
             estimates[n] = float(table[n][0])
         delta = max(delta, float(table.get("discrepancy", 0.0)))
+    for name, (value, se) in provenance.get("measured", {}).items():
+        if name in PARAMETERS and math.isfinite(float(se)) and float(se) > 0.0:
+            keys.append(name)
+            estimates[name] = float(value)
+            blocks.append(np.array([[float(se) ** 2]]))
     return estimates, block_diag(*blocks), keys, delta
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 from settler.output import OutputError, atomic_write_text, source_commit
 
 from .hierarchy import CLOSURES, FORM, SWITCH_NOTES, TARGETS, Hierarchy
+from .uncertainty import PARAMETERS
 
 
 def _q(text) -> str:
@@ -137,6 +138,12 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
               f"quadrature_error = {c['quadrature_error']!r}  # - [derived] part of the standard error",
               f"merges = {c['merges']}  # - [derived] of the two fed sizes' bins",
               f"expected_collisions = {c['expected_collisions']!r}  # - [derived] at efficiency 1"]
+    fitted = {name for fit in result.levels for name in fit.parameters} | {"collision_efficiency"}
+    measured = {k: v for k, v in result.values.items() if k not in fitted}
+    if measured:  # measured before the fit, with their own standard errors: the bands draw them too
+        lines += ["", "[provenance.measured]"]
+        lines += [f"{key} = [{_float(value)}, {_float(se)}]  # {PARAMETERS[key][2]} [derived] value, standard error"
+                  for key, (value, se) in measured.items()]
     for fit in result.levels:
         lines += ["", f"[provenance.{fit.level}]",
                   f"runs = [{', '.join(_q(r) for r in fit.runs)}]  # [derived] the level's fitted runs",

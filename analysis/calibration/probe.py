@@ -12,7 +12,10 @@ per run of the relative error reduced / full - 1 of the droplet count, mean diam
 velocity (:data:`analysis.calibration.targets.TARGET_COLUMNS`). A registered hold-out is refused, as the fit refuses
 it (:func:`analysis.calibration.registry.refuse_holdouts`): a probe chooses closures, and no closure may be chosen
 from a hold-out. Keys a coalescence-off run's case refuses without a bottom layer (the bottom layer's factor and its
-turning share) are left out for those runs, as the hierarchy's transport level has no bottom layer.
+turning share) are left out for those runs, as the hierarchy's transport level has no bottom layer. What a set fits
+is not measured and needs ``--set``: under ``zones_core`` popbal.plume_core_radius, channel_radius_factor and
+bottom_layer_factor (measured at the fit's radii); under ``zones_stir`` also bottom_turning_share (its form is the
+set's, 'uniform'), while the channel's collision radii and the outer stirring come measured.
 
 ``--bands`` adds, per run, where each model holds its matte and where it merges, band by band
 (:func:`zone_bands`): the full run's plume core and return flow (``plume_zones.csv``) and merges under the inlet and

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Fittable [popbal] keys: name -> (lower bound, upper bound, unit). Bounds: physical (>= 0, a fraction <= 1) and
+#: Fittable [popbal] keys, and those a closure set measures before its fit and the bands draw (the collision radii,
+#: outer_dispersion): name -> (lower bound, upper bound, unit). Bounds [chosen]: physical (>= 0, a fraction <= 1) and
 #: wide enough that an estimate on a bound says the data push beyond what the form allows; the channel must fit in
 #: the 0.2 m boxes (R_c < 0.113 m = 1.5 inlet radii of the simple and cubic cases).
 PARAMETERS: dict[str, tuple[float, float, str]] = {
