@@ -410,7 +410,7 @@ display(Markdown("\n\n".join(said)))
 
 # %%
 from analysis.calibration.bands import CURRENT_LAYER
-from analysis.calibration.layer import fitted_set_engine
+from analysis.calibration.layer import BANDS_DRAW_FROM, bands_draw_parameters, fitted_set_engine
 from analysis.calibration.targets import TARGET_COLUMNS, load_target, seed_scatter
 
 layer_path = calibration_path(CURRENT_LAYER)
@@ -494,6 +494,12 @@ else:
     recorded = dprov["holdouts"].get("band_coverage", math.nan)
     print(f"band coverage: {inside} of {total} held-out window means inside their 90 % bands (recorded in the "
           f"layer: {recorded:.3g}); an honest band holds about 90 %")
+    drew = bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent)
+    if drew is not True:
+        print(("This layer was written before " if drew is False else "git cannot tell whether this layer was "
+               "written after ") + f"{BANDS_DRAW_FROM} (2026-12-07), from which popbal runs at each parameter draw: "
+              "before it the draws were overridden by the estimates, and these bands are the discrepancy term's "
+              "alone, too narrow for the parameters' uncertainty.")
 
 # %%
 gate_words = ("Every level passes the identifiability gate;" if dprov["gate_passed"] else

@@ -919,6 +919,29 @@ def test_a_layer_names_the_reference_set_engine_it_was_fitted_to():
     assert fitted_set_engine("0" * 40, root) is None
 
 
+def test_a_layer_says_whether_its_bands_were_drawn_over_the_parameters():
+    """bands_draw_parameters: zones_core's layer (05f5cec) predates the fix of 757f27c, from which the hold-outs'
+    bands run popbal at each draw, and is told apart from a commit after it (HEAD) and one git does not know (None);
+    the fix commit's own parent predates it."""
+    import shutil
+    import subprocess
+    import tomllib
+    from pathlib import Path
+
+    from analysis.calibration.layer import BANDS_DRAW_FROM, bands_draw_parameters
+
+    root = Path(__file__).resolve().parents[1]
+    shallow = subprocess.run(["git", "-C", str(root), "rev-parse", "--is-shallow-repository"], capture_output=True,
+                             text=True) if shutil.which("git") else None
+    if shallow is None or shallow.stdout.strip() != "false":
+        pytest.skip("no full git history in this checkout")
+    commit = tomllib.loads((root / "data" / "calibration" / "zones_core.toml").read_text())["provenance"]["code_commit"]
+    assert bands_draw_parameters(commit, root) is False
+    assert bands_draw_parameters(BANDS_DRAW_FROM + "^", root) is False
+    assert bands_draw_parameters(BANDS_DRAW_FROM, root) is True and bands_draw_parameters("HEAD", root) is True
+    assert bands_draw_parameters("0" * 40, root) is None
+
+
 @pytest.mark.parametrize("closures", ["zones_core", "zones_stir"])
 def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_level_alone(closures, tmp_path,
                                                                                          monkeypatch):

@@ -211,3 +211,23 @@ def fitted_set_engine(code_commit: str, repository: Path) -> dict | None:
         return tomllib.loads(shown.stdout).get("set")
     except tomllib.TOMLDecodeError:
         return None
+
+
+#: The commit from which the hold-outs' bands run popbal at each parameter draw (757f27c, 2026-12-07): before it every
+#: draw was overridden by the estimates, and a layer's recorded bands and band_coverage are those of the discrepancy
+#: term alone.
+BANDS_DRAW_FROM = "757f27c"
+
+
+def bands_draw_parameters(code_commit: str, repository: Path) -> bool | None:
+    """Whether a layer written at ``code_commit`` drew its hold-out bands over the parameters (its commit descends
+    from :data:`BANDS_DRAW_FROM`), False where it drew them over the discrepancy alone, None where git or the history
+    is not at hand (a shallow clone, an installed package)."""
+    import subprocess
+
+    try:
+        done = subprocess.run(["git", "-C", str(repository), "merge-base", "--is-ancestor", BANDS_DRAW_FROM,
+                               code_commit], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return {0: True, 1: False}.get(done.returncode)
