@@ -152,7 +152,11 @@ is at most ``plume_core_column_share`` beta of the column's radius R (deep's fee
 plume whose feed Reynolds number rho_s Q_ch / (mu R_0) (:func:`feed_reynolds`) reaches ``spread_flux_reynolds``
 spreads its core over ``spread_core_share`` s of R (simple and cubic: R* / R = 0.42). The boundary is bracketed by
 the regime runs (compact at 0.62, spread at 0.70 and 1.24 with R_0 = 9.5 mm), not derived; it does not hold the
-coalescence-off demo at 2.5 mm cells, whose plume spreads at 0.31.
+coalescence-off demo at 2.5 mm cells, whose plume spreads at 0.31. Taken at the fitted R_0 the rule moves runs
+across the boundary as the fit moves R_0: zones_stir's training fit (2026-12-07) stopped at R_0 = 8.9424 mm, where
+two compact demo runs stand at 0.6600000 against 0.66, and 8.9420 mm spreads them (count +63 and +80 %).
+``spread_reference_radius`` L takes the number at a fixed length instead, rho_s Q_ch / (mu L), the 9.5 mm the
+boundary was bracketed at.
 
 Roof layer (``roof_layer_coefficient`` c_L, ``roof_thickness`` delta; zone "roof"). In the full runs about half of
 the demo family's droplets sit in the top 10 mm, under the inlet (data/reference/<run>/zones.csv: the roof layer's

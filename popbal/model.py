@@ -530,7 +530,8 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
     p = case.popbal
     spread = (p.spread_flux_reynolds, p.spread_core_share)
     for key, value in (("plume_core_column_share", p.plume_core_column_share),
-                       ("spread_flux_reynolds", p.spread_flux_reynolds), ("spread_core_share", p.spread_core_share)):
+                       ("spread_flux_reynolds", p.spread_flux_reynolds), ("spread_core_share", p.spread_core_share),
+                       ("spread_reference_radius", p.spread_reference_radius)):
         if value is not None and p.plume_core_radius is None:
             raise CaseError(f"popbal.{key} = {value!r}: bounds or replaces the slag core popbal.plume_core_radius; "
                             "allowed only with it (or leave it out)")
@@ -539,6 +540,7 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
                         "allowed: both (a spread plume's core over the column) or neither")
     if p.plume_core_radius is None:
         return channel_radius
+    plume_spreads(case)  # refuses spread_reference_radius without spread_flux_reynolds
     column = column_radius(case)
     core = p.spread_core_share * column if plume_spreads(case) else p.plume_core_radius
     if p.plume_core_column_share is not None:
@@ -558,11 +560,15 @@ def channel_volume_flux(case: Case) -> float:
 
 def plume_spreads(case: Case) -> bool:
     """The slag core's regime (popbal.closures): True where popbal.spread_flux_reynolds is given and the feed
-    Reynolds number rho_s Q_ch / (mu R_0) at popbal.plume_core_radius R_0 reaches it."""
+    Reynolds number rho_s Q_ch / (mu L) reaches it, L = popbal.spread_reference_radius, else popbal.plume_core_radius
+    R_0. CaseError for spread_reference_radius without spread_flux_reynolds."""
     p = case.popbal
+    if p.spread_reference_radius is not None and p.spread_flux_reynolds is None:
+        raise CaseError(f"popbal.spread_reference_radius = {p.spread_reference_radius!r} m: the length of the regime "
+                        "rule's feed Reynolds number; allowed only with popbal.spread_flux_reynolds (or leave it out)")
+    length = p.plume_core_radius if p.spread_reference_radius is None else p.spread_reference_radius
     return p.spread_flux_reynolds is not None and closures.feed_reynolds(
-        channel_volume_flux(case), p.plume_core_radius, case.slag.density, case.slag_viscosity) \
-        >= p.spread_flux_reynolds
+        channel_volume_flux(case), length, case.slag.density, case.slag_viscosity) >= p.spread_flux_reynolds
 
 
 def column_radius(case: Case) -> float:

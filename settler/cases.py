@@ -304,6 +304,11 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                               "spread_core_share times the column's equivalent radius "
                                               "(popbal.closures); absent: every plume is compact.", 0.0,
                                       exclusive_minimum=True, optional=True),
+        "spread_reference_radius": Field(F, "m", "With spread_flux_reynolds: the length at which the regime's feed "
+                                                 "Reynolds number rho_s Q / (mu L) is taken, so that a fit of "
+                                                 "plume_core_radius does not move runs across the boundary "
+                                                 "(popbal.closures); absent: plume_core_radius.", 0.0,
+                                         exclusive_minimum=True, optional=True),
         "spread_core_share": Field(F, "-", "s: the spread plume's slag core over the column's equivalent radius "
                                            "(needed with spread_flux_reynolds).", 0.0, exclusive_minimum=True,
                                    optional=True),

@@ -690,3 +690,22 @@ def test_turning_without_a_bottom_layer_or_a_return_flow_is_refused(overrides, n
 def test_lift_keys_without_what_they_lift_from_or_into_are_refused(overrides, names):
     with pytest.raises(CaseError, match=names):
         popbal.setup("demo", overrides)
+
+
+def test_the_regime_rule_at_a_reference_radius_does_not_move_with_the_fitted_core():
+    """popbal.spread_reference_radius L: the regime's feed Reynolds number rho_s Q / (mu L) at a fixed length. At
+    zones_core's boundary 0.66, demo_feed_double_fine (0.62 at 9.5 mm) spreads once R_0 falls to 8.5 mm (0.62 x 9.5
+    / 8.5 = 0.69) unless L = 9.5 mm holds it compact; simple (1.24 at 9.5 mm) spreads either way. L without the
+    boundary is refused by name."""
+    from popbal.model import plume_spreads
+    from settler.cases import load_case
+
+    layer = {"case.calibration": "zones_core", "popbal.plume_core_radius": 0.0085}
+    for run, at_core, at_reference in (("demo_feed_double_fine", True, False), ("simple", True, True)):
+        case_file = f"data/reference/{run}/case.toml"
+        assert plume_spreads(load_case(case_file, layer)) is at_core
+        assert plume_spreads(load_case(case_file, {**layer, "popbal.spread_reference_radius": 0.0095})) is at_reference
+    with pytest.raises(CaseError, match="popbal.spread_reference_radius = 0.0095 m: the length of the regime rule"):
+        popbal.setup("demo", ["popbal.confinement=true", "popbal.plume_law=line_force",
+                              "popbal.channel_radius_factor=0.5", "popbal.plume_core_radius=0.0095",
+                              "popbal.spread_reference_radius=0.0095"])
