@@ -154,7 +154,8 @@ spreads its core over ``spread_core_share`` s of R (simple and cubic: R* / R = 0
 the regime runs (compact at 0.62, spread at 0.70 and 1.24 with R_0 = 9.5 mm), not derived; it does not hold the
 coalescence-off demo at 2.5 mm cells, whose plume spreads at 0.31. Taken at the fitted R_0 the rule moves runs
 across the boundary as the fit moves R_0: zones_stir's training fit (2026-12-07) stopped at R_0 = 8.9424 mm, where
-two compact demo runs stand at 0.6600000 against 0.66, and 8.9420 mm spreads them (count +63 and +80 %).
+demo_feed_double_fine and demo_visc_half_fine stand at 0.65999998 against 0.66, and 8.9420 mm spreads them (count
++80 and +63 %).
 ``spread_reference_radius`` L takes the number at a fixed length instead, rho_s Q_ch / (mu L), the 9.5 mm the
 boundary was bracketed at.
 

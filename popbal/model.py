@@ -529,9 +529,12 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
     R_c (None when not given). CaseError where the keys do not go together."""
     p = case.popbal
     spread = (p.spread_flux_reynolds, p.spread_core_share)
+    if p.spread_reference_radius is not None and p.plume_core_radius is None:
+        raise CaseError(f"popbal.spread_reference_radius = {p.spread_reference_radius!r} m: the length of the regime "
+                        "rule's feed Reynolds number; allowed only with popbal.plume_core_radius and "
+                        "popbal.spread_flux_reynolds (or leave it out)")
     for key, value in (("plume_core_column_share", p.plume_core_column_share),
-                       ("spread_flux_reynolds", p.spread_flux_reynolds), ("spread_core_share", p.spread_core_share),
-                       ("spread_reference_radius", p.spread_reference_radius)):
+                       ("spread_flux_reynolds", p.spread_flux_reynolds), ("spread_core_share", p.spread_core_share)):
         if value is not None and p.plume_core_radius is None:
             raise CaseError(f"popbal.{key} = {value!r}: bounds or replaces the slag core popbal.plume_core_radius; "
                             "allowed only with it (or leave it out)")
@@ -540,9 +543,9 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
                         "allowed: both (a spread plume's core over the column) or neither")
     if p.plume_core_radius is None:
         return channel_radius
-    plume_spreads(case)  # refuses spread_reference_radius without spread_flux_reynolds
+    spreads = plume_spreads(case)  # refuses spread_reference_radius without spread_flux_reynolds
     column = column_radius(case)
-    core = p.spread_core_share * column if plume_spreads(case) else p.plume_core_radius
+    core = p.spread_core_share * column if spreads else p.plume_core_radius
     if p.plume_core_column_share is not None:
         core = min(core, p.plume_core_column_share * column)
     if core >= column:

@@ -411,6 +411,14 @@ display(Markdown("\n\n".join(said)))
 # %%
 from analysis.calibration.bands import CURRENT_LAYER
 from analysis.calibration.layer import BANDS_DRAW_FROM, bands_draw_parameters, fitted_set_engine
+
+#: What the report says of a layer whose bands predate the fix (bands_draw_parameters False) or may (None).
+BANDS_CAVEAT = {False: f"This layer was written before {BANDS_DRAW_FROM[:7]} (2026-12-07), from which popbal runs at "
+                       "each parameter draw: its draws were overridden by the estimates, and its bands are the "
+                       "discrepancy term's alone, too narrow for the parameters' uncertainty.",
+                None: f"git cannot tell whether this layer was written after {BANDS_DRAW_FROM[:7]} (2026-12-07), "
+                      "from which popbal runs at each parameter draw; if before, its bands are the discrepancy "
+                      "term's alone, too narrow for the parameters' uncertainty."}
 from analysis.calibration.targets import TARGET_COLUMNS, load_target, seed_scatter
 
 layer_path = calibration_path(CURRENT_LAYER)
@@ -466,6 +474,8 @@ if holdout_runs and (fitted_engine is None or fitted_engine != stored_engine):
                                                 f"that of engine fulldem {stored_engine['fulldem'][:7]}")
           + ": its bands are not compared with today's runs (until the layer is refitted to them). Recorded in the "
           f"layer against the runs it was fitted to: band coverage {recorded:.3g}")
+    if bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent) is not True:
+        print(BANDS_CAVEAT[bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent)])
     holdout_runs = []
 elif not holdout_runs:
     print("the layer records no hold-out bands (its gate failed, or it was fitted with --band-samples 0)")
@@ -496,10 +506,7 @@ else:
           f"layer: {recorded:.3g}); an honest band holds about 90 %")
     drew = bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent)
     if drew is not True:
-        print(("This layer was written before " if drew is False else "git cannot tell whether this layer was "
-               "written after ") + f"{BANDS_DRAW_FROM} (2026-12-07), from which popbal runs at each parameter draw: "
-              "before it the draws were overridden by the estimates, and these bands are the discrepancy term's "
-              "alone, too narrow for the parameters' uncertainty.")
+        print(BANDS_CAVEAT[drew])
 
 # %%
 gate_words = ("Every level passes the identifiability gate;" if dprov["gate_passed"] else

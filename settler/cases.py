@@ -300,7 +300,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                                  "(popbal.closures); absent: no such bound.", 0.0,
                                          exclusive_minimum=True, optional=True),
         "spread_flux_reynolds": Field(F, "-", "Re_Q,c: with plume_core_radius, a plume whose feed Reynolds number "
-                                              "rho_s Q / (mu R_s) reaches it spreads, its slag core then "
+                                              "rho_s Q / (mu L) reaches it spreads (L: spread_reference_radius, "
+                                              "else plume_core_radius), its slag core then "
                                               "spread_core_share times the column's equivalent radius "
                                               "(popbal.closures); absent: every plume is compact.", 0.0,
                                       exclusive_minimum=True, optional=True),

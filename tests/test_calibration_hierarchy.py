@@ -1051,6 +1051,13 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
         i = keys.index(key)  # measured before the fit: drawn in the bands with its own variance
         assert estimates[key] == result.values[key][0] and covariance[i, i] == pytest.approx(se**2, rel=1e-12)
         assert not np.any(np.delete(covariance[i], i))
+    for bad in ("plume_core_radius = [0.01, 0.001]", "outer_dispersion = 4.8e-4"):  # fitted too; not [value, se]
+        key = bad.split(" = ")[0]
+        (tmp_path / "bad.toml").write_text(text.replace("[provenance.measured]", f"[provenance.measured]\n{bad}", 1)
+                                           if key == "plume_core_radius" else
+                                           text.replace("\nouter_dispersion = [", f"\n{bad}\nx = [", 1))
+        with pytest.raises(ValueError, match=f"bad.toml: \\[provenance.measured\\] {key} = .*allowed \\[value"):
+            covariance_from_layer(tmp_path / "bad.toml")
 
 
 def test_the_spread_core_share_is_measured_in_the_runs_the_regime_rule_spreads():

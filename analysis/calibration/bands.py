@@ -58,7 +58,11 @@ def covariance_from_layer(path) -> tuple[dict[str, float], np.ndarray, list[str]
             keys.append(n)
             estimates[n] = float(table[n][0])
         delta = max(delta, float(table.get("discrepancy", 0.0)))
-    for name, (value, se) in provenance.get("measured", {}).items():
+    for name, entry in provenance.get("measured", {}).items():
+        if not (isinstance(entry, list) and len(entry) == 2) or name in keys:
+            raise ValueError(f"{path}: [provenance.measured] {name} = {entry!r}: allowed [value, standard error] of a "
+                             "value measured before the fit, not one of the fitted parameters")
+        value, se = entry
         if name in PARAMETERS and math.isfinite(float(se)) and float(se) > 0.0:
             keys.append(name)
             estimates[name] = float(value)

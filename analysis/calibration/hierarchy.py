@@ -77,7 +77,7 @@ CORE = {"popbal.confinement": True, "popbal.plume_law": "line_force", "popbal.ch
 #: channel: the five compact demo runs' droplets collide 1.8-3.1 times more often than that (docs/guide/
 #: reduced-model.md). b is measured at 2.5 mm cells in the demos and shrinks with the cell (8.0 / 6.6 / 5.3 mm at
 #: 5 / 3.3 / 2.5 mm in the demo's grid study), an error its standard error leaves out. Two compact runs sit at a
-#: feed Reynolds number of 0.62 against the regime boundary 0.66: taken at the fitted R_0, an R_0 below 8.92 mm
+#: feed Reynolds number of 0.62 against the regime boundary 0.66: taken at the fitted R_0, an R_0 below 8.942 mm
 #: spreads them, and the set's first training fit stopped at that edge (8.9424 mm; popbal.closures), so the rule
 #: takes the number at the 9.5 mm the boundary was bracketed at (popbal.spread_reference_radius).
 STIR = {**{k: v for k, v in CORE.items() if k != "popbal.bottom_turning_share"},

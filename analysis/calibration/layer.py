@@ -142,8 +142,8 @@ def layer_text(result: Hierarchy, registry_path, command: str = "") -> str:
     measured = {k: v for k, v in result.values.items() if k not in fitted}
     if measured:  # measured before the fit, with their own standard errors: the bands draw them too
         lines += ["", "[provenance.measured]"]
-        lines += [f"{key} = [{_float(value)}, {_float(se)}]  # {PARAMETERS[key][2]} [derived] value, standard error"
-                  for key, (value, se) in measured.items()]
+        lines += [f"{key} = [{_float(value)}, {_float(se)}]  # {PARAMETERS[key][2] if key in PARAMETERS else '?'} "
+                  "[derived] value, standard error" for key, (value, se) in measured.items()]
     for fit in result.levels:
         lines += ["", f"[provenance.{fit.level}]",
                   f"runs = [{', '.join(_q(r) for r in fit.runs)}]  # [derived] the level's fitted runs",
@@ -216,7 +216,7 @@ def fitted_set_engine(code_commit: str, repository: Path) -> dict | None:
 #: The commit from which the hold-outs' bands run popbal at each parameter draw (757f27c, 2026-12-07): before it every
 #: draw was overridden by the estimates, and a layer's recorded bands and band_coverage are those of the discrepancy
 #: term alone.
-BANDS_DRAW_FROM = "757f27c"
+BANDS_DRAW_FROM = "757f27c0133f5a06ef4aac9e170b481a9d663f18"
 
 
 def bands_draw_parameters(code_commit: str, repository: Path) -> bool | None:

@@ -371,8 +371,9 @@ def floor_shear_from_collisions(runs, reference_dir: str | Path, values: dict | 
 def spread_share_from_groups(runs, reference_dir: str | Path, fixed: dict) -> dict:
     """The spread plume's slag core over the column, s = R* / R [-] (R* the equivalent core at the axis speed,
     :func:`analysis.groups.stored_measured_groups`; R the column's equivalent radius): the geometric mean over the
-    ``runs`` whose feed Reynolds number rho_s Q / (mu R_0) reaches popbal.spread_flux_reynolds under ``fixed``
-    ({dotted key: value}, with popbal.plume_core_radius R_0), with its standard error; ValueError where none does."""
+    ``runs`` that popbal's regime rule spreads under ``fixed`` ({dotted key: value}, with popbal.plume_core_radius
+    R_0: the feed Reynolds number rho_s Q / (mu L) reaching popbal.spread_flux_reynolds, L =
+    popbal.spread_reference_radius or R_0), with its standard error; ValueError where none does."""
     from analysis.groups import stored_measured_groups
     from popbal.model import column_radius, plume_spreads
     from settler.cases import load_case
