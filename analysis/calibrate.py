@@ -88,8 +88,7 @@ CORRELATION_LIMIT = 0.95
 RELATIVE_ERROR_LIMIT = 1.0
 SINGULAR_RATIO_LIMIT = 1e-3
 
-#: The closure sets of ``--closures`` (analysis.calibration.hierarchy.CLOSURES, not imported here so that the command
-#: line starts without the calibration package; a test holds the two equal).
+#: ``--closures``' sets (calibration.hierarchy.CLOSURES, not imported: the command starts without it; a test holds them)
 CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy", "zones", "zones_dilution", "zones_floor", "zones_line",
                  "zones_drain", "zones_core", "zones_stir")
 
@@ -607,10 +606,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "roof's thickness from its drainage law, popbal.roof_thickness_form = 'drainage') or "
                              "'zones_core' ('zones_drain' with the plume's slag core apart from the droplets' "
                              "channel, popbal.plume_core_radius, fitted with the channel's radius factor at the whole "
-                             "level alone) or 'zones_stir' ('zones_core' with the turn above the bottom layer the same "
-                             "share of every size, fitted with them, the outer zone stirred at the D the whole runs' "
-                             "suspensions give and the channel's collision radius per regime from their clustering); "
-                             "analysis.calibration.hierarchy.CLOSURES; default designed")
+                             "level alone) or 'zones_stir' ('zones_core' with a uniform turn, measured stirring and "
+                             "channel collision radii); analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
                              "no bands, the errors only)")
