@@ -474,8 +474,7 @@ if holdout_runs and (fitted_engine is None or fitted_engine != stored_engine):
                                                 f"that of engine fulldem {stored_engine['fulldem'][:7]}")
           + ": its bands are not compared with today's runs (until the layer is refitted to them). Recorded in the "
           f"layer against the runs it was fitted to: band coverage {recorded:.3g}")
-    if bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent) is not True:
-        print(BANDS_CAVEAT[bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent)])
+    print(BANDS_CAVEAT.get(bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent), ""))
     holdout_runs = []
 elif not holdout_runs:
     print("the layer records no hold-out bands (its gate failed, or it was fitted with --band-samples 0)")

@@ -895,23 +895,30 @@ def test_zones_floor_fits_the_plume_without_a_bottom_layer_and_measures_it_in_th
     assert kernel_thickness["value"]["b"] / kernel_thickness["value"]["a"] == pytest.approx(math.sqrt(2.0), rel=1e-9)
 
 
-def test_a_layer_names_the_reference_set_engine_it_was_fitted_to():
-    """fitted_set_engine reads data/reference/engines.toml's [set] at a layer's code commit: the committed layer's
-    set is a real engine (three 40-hex git trees) and a commit git does not know gives None, not an error (the
-    calibration report then leaves its bands unchecked against today's runs)."""
-    import re
+def _checkout_with_history():
+    """This checkout's root, or a skip where git or its full history is not at hand (a shallow clone)."""
     import shutil
     import subprocess
-    import tomllib
     from pathlib import Path
-
-    from analysis.calibration.layer import fitted_set_engine
 
     root = Path(__file__).resolve().parents[1]
     shallow = subprocess.run(["git", "-C", str(root), "rev-parse", "--is-shallow-repository"], capture_output=True,
                              text=True) if shutil.which("git") else None
     if shallow is None or shallow.stdout.strip() != "false":
         pytest.skip("no full git history in this checkout")
+    return root
+
+
+def test_a_layer_names_the_reference_set_engine_it_was_fitted_to():
+    """fitted_set_engine reads data/reference/engines.toml's [set] at a layer's code commit: the committed layer's
+    set is a real engine (three 40-hex git trees) and a commit git does not know gives None, not an error (the
+    calibration report then leaves its bands unchecked against today's runs)."""
+    import re
+    import tomllib
+
+    from analysis.calibration.layer import fitted_set_engine
+
+    root = _checkout_with_history()
     commit = tomllib.loads((root / "data" / "calibration" / "designed.toml").read_text())["provenance"]["code_commit"]
     engine = fitted_set_engine(commit, root)
     assert set(engine) == {"fulldem", "popbal", "settler"}
@@ -923,18 +930,11 @@ def test_a_layer_says_whether_its_bands_were_drawn_over_the_parameters():
     """bands_draw_parameters: zones_core's layer (05f5cec) predates the fix of 757f27c, from which the hold-outs'
     bands run popbal at each draw, and is told apart from a commit after it (HEAD) and one git does not know (None);
     the fix commit's own parent predates it."""
-    import shutil
-    import subprocess
     import tomllib
-    from pathlib import Path
 
     from analysis.calibration.layer import BANDS_DRAW_FROM, bands_draw_parameters
 
-    root = Path(__file__).resolve().parents[1]
-    shallow = subprocess.run(["git", "-C", str(root), "rev-parse", "--is-shallow-repository"], capture_output=True,
-                             text=True) if shutil.which("git") else None
-    if shallow is None or shallow.stdout.strip() != "false":
-        pytest.skip("no full git history in this checkout")
+    root = _checkout_with_history()
     commit = tomllib.loads((root / "data" / "calibration" / "zones_core.toml").read_text())["provenance"]["code_commit"]
     assert bands_draw_parameters(commit, root) is False
     assert bands_draw_parameters(BANDS_DRAW_FROM + "^", root) is False

@@ -191,21 +191,26 @@ def write_layer(result: Hierarchy, path, registry_path, command: str = "") -> Pa
     return path
 
 
+def _git(repository: Path, *args):
+    """git ``args`` in ``repository`` (subprocess.CompletedProcess, text), or None where git cannot be run."""
+    import subprocess
+
+    try:
+        return subprocess.run(["git", "-C", str(repository), *args], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
 def fitted_set_engine(code_commit: str, repository: Path) -> dict | None:
     """The reference set's engine that a layer was fitted to: the ``[set]`` table of ``data/reference/engines.toml``
     at the layer's recorded ``code_commit``, read with git from ``repository`` (a checkout's root); None where git,
     the history or that file is not at hand (a shallow clone, an installed package). A layer whose set engine is not
     the stored set's was fitted to runs that are no longer stored, and its recorded errors and bands are not to be
     read against today's runs."""
-    import subprocess
     import tomllib
 
-    try:
-        shown = subprocess.run(["git", "-C", str(repository), "show", f"{code_commit}:data/reference/engines.toml"],
-                               capture_output=True, text=True, timeout=30)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    if shown.returncode != 0:
+    shown = _git(repository, "show", f"{code_commit}:data/reference/engines.toml")
+    if shown is None or shown.returncode != 0:
         return None
     try:
         return tomllib.loads(shown.stdout).get("set")
@@ -223,11 +228,5 @@ def bands_draw_parameters(code_commit: str, repository: Path) -> bool | None:
     """Whether a layer written at ``code_commit`` drew its hold-out bands over the parameters (its commit descends
     from :data:`BANDS_DRAW_FROM`), False where it drew them over the discrepancy alone, None where git or the history
     is not at hand (a shallow clone, an installed package)."""
-    import subprocess
-
-    try:
-        done = subprocess.run(["git", "-C", str(repository), "merge-base", "--is-ancestor", BANDS_DRAW_FROM,
-                               code_commit], capture_output=True, text=True, timeout=30)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return {0: True, 1: False}.get(done.returncode)
+    done = _git(repository, "merge-base", "--is-ancestor", BANDS_DRAW_FROM, code_commit)
+    return None if done is None else {0: True, 1: False}.get(done.returncode)
