@@ -25,6 +25,13 @@ def _geometric_mean(values) -> float:
     return float(np.exp(np.mean(np.log(list(values)))))
 
 
+def _geometric_mean_with_error(values) -> tuple[float, float]:
+    """(geometric mean, its standard error b x se(mean ln b), NaN from one value) of the positive ``values``."""
+    logs = np.log(list(values))
+    value = float(np.exp(logs.mean()))
+    return value, value * float(np.std(logs, ddof=1) / math.sqrt(len(logs))) if len(logs) > 1 else math.nan
+
+
 def _core_band(folder: Path, table: str) -> pd.DataFrame:
     """The rows of a stored run's ``table`` (zone_profile.csv or channel_profile.csv) in the :data:`CORE_BAND` of the
     height over the run's steady window."""
@@ -387,10 +394,8 @@ def spread_share_from_groups(runs, reference_dir: str | Path, fixed: dict) -> di
     if not shares:
         raise ValueError(f"no run of {', '.join(runs) or 'none'} is spread by the regime rule: the spread core's "
                          "share cannot be measured")
-    logs = np.log(list(shares.values()))
-    se = float(np.std(logs, ddof=1) / math.sqrt(len(logs))) if len(logs) > 1 else math.nan
-    value = float(np.exp(logs.mean()))
-    return {"value": value, "standard_error": value * se, "per_run": shares, "runs": list(shares)}
+    value, se = _geometric_mean_with_error(shares.values())
+    return {"value": value, "standard_error": se, "per_run": shares, "runs": list(shares)}
 
 
 def _with_snapshots(runs, reference_dir) -> tuple[list[str], list[str]]:
@@ -442,10 +447,8 @@ def collision_radius_from_clustering(runs, reference_dir: str | Path, fixed: dic
                  if v["regime"] == regime and r not in leave_out and math.isfinite(v["collision_radius"])}
         if not radii:
             return None
-        logs = np.log(list(radii.values()))
-        value = float(np.exp(logs.mean()))
-        se = float(np.std(logs, ddof=1) / math.sqrt(len(logs))) if len(logs) > 1 else math.nan
-        return {"value": value, "standard_error": value * se, "runs": list(radii)}
+        value, se = _geometric_mean_with_error(radii.values())
+        return {"value": value, "standard_error": se, "runs": list(radii)}
 
     compact, spread = pooled("compact", excluded), pooled("spread", excluded)
     left = (f"; excluded (S <= 1): {', '.join(excluded) or 'none'}; no droplet snapshot: "
