@@ -585,29 +585,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--leave-out", default=None, metavar="FAMILY",
                         help="with --set: leave-one-family-out cross-validation, the registry's [families] FAMILY "
-                             "held out as well (fitted on the rest, scored with the hold-outs); not with --write")
+                             "held out as well (fitted on the rest, scored with the hold-outs, or alone with "
+                             "--training-only); not with --write")
     parser.add_argument("--training-only", action="store_true",
-                        help="with --set: fit the registry's levels and score no hold-out, whatever the gate (a "
-                             "closure set tried on the training runs before it is final, so that the hold-outs stay "
-                             "blind); not with --write")
+                        help="with --set: fit the registry's levels and score no pre-registered hold-out, whatever "
+                             "the gate (a closure set tried before it is final, the hold-outs kept blind); not with "
+                             "--write")
+    parser.add_argument("--no-profile", action="store_true",
+                        help="with --set: no profile-likelihood intervals (the gate checks standard errors and "
+                             "correlations alone; hours sooner); not with --write")
     parser.add_argument("--closures", default="designed", choices=CLOSURE_NAMES,
-                        help="with --set: the closure set fitted: 'designed' (plume and return flow), 'layers' "
-                             "(with popbal's roof and bottom layers: the roof law from the zone diagnostics, the "
-                             "bottom layer's thickness factor fitted in place of the return flow), 'busy' "
-                             "('designed' with popbal.busy_partners: one merge at a time per droplet, each taking the "
-                             "full engine's growth time), 'layers_busy' (both) or 'zones' ('layers' with the "
-                             "confined plume and the roof layer's own efficiency and shear measured in the whole "
-                             "runs' roof) or 'zones_dilution' ('zones' with the plume's volume fraction diluted by "
-                             "its Reynolds number, k_R and Re_d from the fitted runs' zone diagnostics) or 'zones_floor' "
-                             "('zones_dilution' with the bottom layer's factor measured in the whole runs' floor "
-                             "layers, not fitted to the coalescence-off runs, whose floors fill) or 'zones_line' "
-                             "('zones_floor' with popbal.plume_law = 'line_force', its transport level scored on "
-                             "the mean diameter and axis velocity alone) or 'zones_drain' ('zones_line' with the "
-                             "roof's thickness from its drainage law, popbal.roof_thickness_form = 'drainage') or "
-                             "'zones_core' ('zones_drain' with the plume's slag core apart from the droplets' "
-                             "channel, popbal.plume_core_radius, fitted with the channel's radius factor at the whole "
-                             "level alone) or 'zones_stir' ('zones_core' with a uniform turn, measured stirring and "
-                             "channel collision radii); analysis.calibration.hierarchy.CLOSURES; default designed")
+                        help="with --set: the closure set fitted: 'designed' (plume, return flow), 'layers' (roof "
+                             "law from the zone diagnostics, bottom layer fitted in place of the return flow), 'busy' "
+                             "('designed', one merge at a time per droplet for the engine's growth time), "
+                             "'layers_busy' (both), 'zones' ('layers', confined plume, roof efficiency and shear "
+                             "measured), 'zones_dilution' ('zones', plume fraction diluted by its Reynolds number), "
+                             "'zones_floor' ('zones_dilution', bottom layer measured in the floors), 'zones_line' "
+                             "('zones_floor', popbal.plume_law = 'line_force'), 'zones_drain' ('zones_line', roof "
+                             "thickness from its drainage law), 'zones_core' ('zones_drain', the slag core "
+                             "popbal.plume_core_radius fitted with the channel's factor at the whole level), "
+                             "'zones_stir' ('zones_core', uniform turn, measured stirring and collision radii); "
+                             "analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "
                              "no bands, the errors only)")

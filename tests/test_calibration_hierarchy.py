@@ -313,6 +313,7 @@ def test_leaving_a_family_out_holds_its_runs_out_of_every_level():
     registry = load_registry()
     left = leave_family_out(registry, "width")
     assert left.holdouts == (*registry.holdouts, *registry.families["width"])
+    assert left.left_out == registry.families["width"] and registry.left_out == ()
     for level, runs in left.levels.items():
         assert not set(runs) & set(registry.families["width"]), level
         assert set(runs) == set(registry.levels[level]) - set(registry.families["width"])
@@ -330,6 +331,7 @@ def test_leaving_a_family_out_holds_its_runs_out_of_every_level():
 
 @pytest.mark.parametrize("extra, message", [(["--leave-out", "feed", "--write", "x.toml"], "not a calibration layer"),
                                             (["--training-only", "--write", "x.toml"], "not a calibration layer"),
+                                            (["--no-profile", "--write", "x.toml"], "records the profile-likelihood"),
                                             (["--band-samples", "3"], "--band-samples 3: allowed 0"),
                                             (["--leave-out", "nope"], "--leave-out 'nope': holdouts.toml has no")])
 def test_settler_calibrate_set_refuses_bad_cross_validation_options(extra, message):
@@ -634,26 +636,28 @@ def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
     assert "confined plume" in (tmp_path / "zones.toml").read_text()
 
 
-@pytest.mark.parametrize("stored_whole, training_only, scored", [(("demo",), False, False),
-                                                                (("demo", "deep_w002"), False, True),
-                                                                (("demo", "deep_w002"), True, False)])
+@pytest.mark.parametrize("stored_whole, training_only, left_out, scored",
+                         [(("demo",), False, (), False), (("demo", "deep_w002"), False, (), True),
+                          (("demo", "deep_w002"), True, (), False), (("demo", "deep_w002"), True, ("demo_x",), True)])
 def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path, monkeypatch, stored_whole,
-                                                                       training_only, scored):
+                                                                       training_only, left_out, scored):
     """A hold-out is scored once, by the fit on every run the registry names: while a level's run is not stored
     yet, or when the fit is asked for the training levels alone (--training-only), a fit that passes its gate still
-    reads no hold-out, and the summary says why. The fits are stubbed here (their physics is tested above and in
-    test_calibration.py); this is the rule only."""
+    reads no hold-out, and the summary says why; a cross-validation fold asked for the training levels alone scores
+    its left-out family and nothing else, so that the blind hold-outs stay blind. The fits are stubbed here (their
+    physics is tested above and in test_calibration.py); this is the rule only."""
     import analysis.calibration.hierarchy as h
     import analysis.kernel_run as kr
     from analysis.calibration.fit import LevelFit
     from analysis.calibration.registry import Registry
 
-    for run in ("kernel", "demo_no_coalescence", *stored_whole, "deep"):
+    for run in ("kernel", "demo_no_coalescence", *stored_whole, "deep", *left_out):
         (tmp_path / run).mkdir()
         (tmp_path / run / "timeseries.csv").write_text("time\n0\n")
-    registry = Registry(holdouts=("deep", "deep_fine"), why={"deep": "test", "deep_fine": "not stored"}, families={},
-                        levels={"collision": ("kernel",), "transport": ("demo_no_coalescence",),
-                                "whole": ("demo", "deep_w002")}, path=tmp_path / "holdouts.toml")
+    registry = Registry(holdouts=("deep", "deep_fine", *left_out), why={"deep": "test", "deep_fine": "not stored"},
+                        families={}, levels={"collision": ("kernel",), "transport": ("demo_no_coalescence",),
+                                             "whole": ("demo", "deep_w002")}, path=tmp_path / "holdouts.toml",
+                        left_out=left_out)
 
     def fit_level(level, targets, case_files, parameters, start, fixed, **kw):
         names = list(parameters)
@@ -676,10 +680,13 @@ def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path,
     result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, training_only=training_only)
     assert result.gate_passed
     assert (result.holdout_errors is not None) is scored
-    assert read == (["deep", "deep_fine"] if scored else [])  # _score_holdouts itself scores the stored ones only
+    expected = (list(left_out) if training_only else ["deep", "deep_fine"]) if scored else []
+    assert read == expected  # _score_holdouts itself scores the stored ones only
     assert result.missing["holdouts"] == ["deep_fine"]
     assert "hold-outs registered but not stored yet (not scored): deep_fine" in result.summary()
-    if training_only:
+    if left_out:
+        assert "left-out family (cross-validation; the pre-registered hold-outs not scored):" in result.summary()
+    elif training_only:
         assert "whole" not in result.missing
         assert "hold-outs: not scored (--training-only: the training levels alone)" in result.summary()
     elif not scored:

@@ -27,6 +27,10 @@ def run_set(args) -> int:
         raise OutputError(f"--write {args.write} with --training-only: a fit that scores no hold-out is a closure "
                           "set's trial on the training runs, not a calibration layer; allowed: --out DIR for its "
                           "results")
+    no_profile = getattr(args, "no_profile", False)
+    if no_profile and args.write:
+        raise OutputError(f"--write {args.write} with --no-profile: a calibration layer records the profile-likelihood "
+                          "intervals its gate checks; allowed: --out DIR for its results")
     if leave_out and args.write:
         raise OutputError(f"--write {args.write} with --leave-out {leave_out}: a cross-validation fit leaves runs out "
                           "on purpose and is not a calibration layer; allowed: --out DIR for its results")
@@ -36,9 +40,10 @@ def run_set(args) -> int:
         if leave_out:
             registry = leave_family_out(registry, leave_out)
             print(f"calibrate: leaving out family {leave_out!r} ({', '.join(registry.families[leave_out])}): "
-                  "scored below with the pre-registered hold-outs")
+                  + ("scored below alone (--training-only)" if training_only
+                     else "scored below with the pre-registered hold-outs"))
         result = calibrate_set(registry, args.reference_dir, max_evaluations=args.max_evaluations,
-                               progress=not args.quiet, band_samples=samples,
+                               profile=not no_profile, progress=not args.quiet, band_samples=samples,
                                closures=getattr(args, "closures", "designed"), workers=workers,
                                training_only=training_only)
     except (RegistryError, FileNotFoundError) as exc:
@@ -47,7 +52,7 @@ def run_set(args) -> int:
     print(text)
     if out is not None:
         data = {"closures": result.closures, "roof": result.roof, "floor": result.floor, "leave_out": leave_out,
-                "training_only": training_only,
+                "training_only": training_only, "profile": not no_profile,
                 "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values,
                 "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -245,13 +245,14 @@ class Hierarchy:
                            "on the whole set")
             lines.append(f"hold-outs: not scored ({'; '.join(why)})")
         else:
-            lines.append("hold-outs (pre-registered, scored once):")
+            lines.append("left-out family (cross-validation; the pre-registered hold-outs not scored):"
+                         if self.training_only else "hold-outs (pre-registered, scored once):")
             lines += _error_rows(self.holdout_errors, TARGETS["holdout"])
             c = self.coverage
             if c is None:
                 lines.append("  no prediction bands (--band-samples 0)")
                 return "\n".join(lines)
-            lines.append(f"  90 % bands ({c['samples']} popbal runs each) hold {c['inside']} of {c['total']} hold-out "
+            lines.append(f"  90 % bands ({c['samples']} popbal runs each) hold {c['inside']} of {c['total']} scored "
                          f"window means ({c['share']:.0%})"
                          + (f"; outside: {', '.join(f'{r} {k}' for r, k in c['outside'])}" if c["outside"] else ""))
         return "\n".join(lines)
@@ -418,8 +419,10 @@ def calibrate_set(registry: Registry, reference_dir: str | Path = "data/referenc
                   closures: str = "designed", workers: int = 1, training_only: bool = False) -> Hierarchy:
     """Run the hierarchy (module docstring) over the runs the registry names and ``reference_dir`` holds, with the
     closure set ``closures`` (:data:`CLOSURES`); ``workers`` processes run each evaluation's popbal runs side by
-    side (:func:`analysis.calibration.fit.worker_pool`: the same numbers). ``training_only``: no hold-out is scored,
-    whatever the gate (a closure set compared on the training runs before it is final)."""
+    side (:func:`analysis.calibration.fit.worker_pool`: the same numbers). ``training_only``: no pre-registered
+    hold-out is scored, whatever the gate (a closure set compared on the training runs before it is final); with a
+    fold's registry (:func:`analysis.calibration.registry.leave_family_out`) its left-out family alone is, after
+    the gate, so that cross-validation leaves the blind hold-outs blind."""
     from .fit import worker_pool
 
     pool = worker_pool(workers)
@@ -475,8 +478,10 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
             fixed[f"popbal.{name}"] = fit.estimates[name]
     gate_passed = all(f.gate["passed"] for f in levels) and collision["standard_error"] < 0.5 * collision["efficiency"]
     holdout_errors, coverage_result = None, None
-    if gate_passed and not any(missing.values()) and not training_only:
-        holdout_errors, coverage_result = _score_holdouts(registry, reference_dir, seed, fixed, values, levels,
+    # --training-only scores no pre-registered hold-out; a cross-validation fold's left-out family alone, if any
+    scored = replace(registry, holdouts=registry.left_out) if training_only else registry
+    if gate_passed and not any(missing.values()) and scored.holdouts:
+        holdout_errors, coverage_result = _score_holdouts(scored, reference_dir, seed, fixed, values, levels,
                                                           band_samples, pool)
     missing[HOLDOUTS_KEY] = _stored(registry.holdouts, reference_dir)[1]  # never scored, whatever the fit
     return Hierarchy(collision=collision, levels=levels, values=values, radius_factor=k_r,

@@ -23,13 +23,15 @@ class RegistryError(ValueError):
 @dataclass(frozen=True)
 class Registry:
     """holdouts: run names never fitted, with why; families: {family: runs} for leave-one-family-out; levels:
-    {level: runs} of the hierarchical fit (:data:`LEVELS`); path: the file read."""
+    {level: runs} of the hierarchical fit (:data:`LEVELS`); path: the file read; left_out: the family's runs a
+    cross-validation fold holds out (:func:`leave_family_out`; among ``holdouts`` too), else empty."""
 
     holdouts: tuple[str, ...]
     why: dict[str, str]
     families: dict[str, tuple[str, ...]]
     levels: dict[str, tuple[str, ...]]
     path: Path
+    left_out: tuple[str, ...] = ()
 
 
 def load_registry(path: str | Path = REGISTRY) -> Registry:
@@ -115,4 +117,4 @@ def leave_family_out(registry: Registry, family: str) -> Registry:
         raise RegistryError(f"--leave-out {family!r}: it takes every run of level {', '.join(emptied)} "
                             f"({registry.path.name}); allowed: a family that leaves each level a run")
     return Registry(holdouts=(*registry.holdouts, *runs), why=why, families=registry.families, levels=levels,
-                    path=registry.path)
+                    path=registry.path, left_out=tuple(runs))
