@@ -592,8 +592,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the gate (a closure set tried before it is final, the hold-outs kept blind); not with "
                              "--write")
     parser.add_argument("--no-profile", action="store_true",
-                        help="with --set: no profile-likelihood intervals (the gate checks standard errors and "
-                             "correlations alone; hours sooner); not with --write")
+                        help="with --set --training-only: no profile-likelihood intervals (the gate checks "
+                             "standard errors and correlations alone; hours sooner)")
     parser.add_argument("--closures", default="designed", choices=CLOSURE_NAMES,
                         help="with --set: the closure set fitted: 'designed' (plume, return flow), 'layers' (roof "
                              "law from the zone diagnostics, bottom layer fitted in place of the return flow), 'busy' "

@@ -331,7 +331,7 @@ def test_leaving_a_family_out_holds_its_runs_out_of_every_level():
 
 @pytest.mark.parametrize("extra, message", [(["--leave-out", "feed", "--write", "x.toml"], "not a calibration layer"),
                                             (["--training-only", "--write", "x.toml"], "not a calibration layer"),
-                                            (["--no-profile", "--write", "x.toml"], "records the profile-likelihood"),
+                                            (["--no-profile"], "--no-profile without --training-only"),
                                             (["--band-samples", "3"], "--band-samples 3: allowed 0"),
                                             (["--leave-out", "nope"], "--leave-out 'nope': holdouts.toml has no")])
 def test_settler_calibrate_set_refuses_bad_cross_validation_options(extra, message):
@@ -686,6 +686,8 @@ def test_holdouts_are_scored_only_by_a_fit_on_the_whole_registered_set(tmp_path,
     assert "hold-outs registered but not stored yet (not scored): deep_fine" in result.summary()
     if left_out:
         assert "left-out family (cross-validation; the pre-registered hold-outs not scored):" in result.summary()
+        result.holdout_errors, result.gate_passed = None, False  # as a fold whose gate failed reads
+        assert "left-out family: not scored (the identifiability gate did not pass)" in result.summary()
     elif training_only:
         assert "whole" not in result.missing
         assert "hold-outs: not scored (--training-only: the training levels alone)" in result.summary()

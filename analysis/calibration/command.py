@@ -28,9 +28,10 @@ def run_set(args) -> int:
                           "set's trial on the training runs, not a calibration layer; allowed: --out DIR for its "
                           "results")
     no_profile = getattr(args, "no_profile", False)
-    if no_profile and args.write:
-        raise OutputError(f"--write {args.write} with --no-profile: a calibration layer records the profile-likelihood "
-                          "intervals its gate checks; allowed: --out DIR for its results")
+    if no_profile and not training_only:
+        raise OutputError("--no-profile without --training-only: a fit that may score the pre-registered hold-outs "
+                          "checks its gate with the profile-likelihood intervals; allowed: --no-profile with "
+                          "--training-only (a trial or a cross-validation fold)")
     if leave_out and args.write:
         raise OutputError(f"--write {args.write} with --leave-out {leave_out}: a cross-validation fit leaves runs out "
                           "on purpose and is not a calibration layer; allowed: --out DIR for its results")
@@ -53,7 +54,8 @@ def run_set(args) -> int:
     if out is not None:
         data = {"closures": result.closures, "roof": result.roof, "floor": result.floor, "leave_out": leave_out,
                 "training_only": training_only, "profile": not no_profile,
-                "holdouts": list(registry.holdouts), "collision": result.collision, "values": result.values,
+                "holdouts": list(registry.holdouts),
+                "scored": list(registry.left_out if training_only else registry.holdouts), "collision": result.collision, "values": result.values,
                 "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,
                 "coverage": result.coverage,

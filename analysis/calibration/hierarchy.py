@@ -195,6 +195,7 @@ class Hierarchy:
     spread: dict | None = None  # the spread plume's core share (zones.spread_share_from_groups), with 'zones_core'
     stir: dict | None = None  # {"radius", "dispersion"}: the channel's collision radii, D_e, with 'zones_stir'
     training_only: bool = False  # asked to score no hold-out (settler calibrate --training-only)
+    left_out: tuple = ()  # a cross-validation fold's family (Registry.left_out), scored alone with training_only
 
     def summary(self) -> str:
         c = self.collision
@@ -238,12 +239,13 @@ class Hierarchy:
             else:
                 lines.append(f"level {level}: registered but not stored yet: {', '.join(runs)}")
         if self.holdout_errors is None:
-            why = ["--training-only: the training levels alone"] if self.training_only else []
+            fold = self.training_only and self.left_out
+            why = ["--training-only: the training levels alone"] if self.training_only and not fold else []
             why += [] if self.gate_passed else ["the identifiability gate did not pass"]
             if any(runs for level, runs in self.missing.items() if level != HOLDOUTS_KEY):
                 why.append("runs the registry names are not stored yet, and a hold-out is scored once, by the fit "
                            "on the whole set")
-            lines.append(f"hold-outs: not scored ({'; '.join(why)})")
+            lines.append(f"{'left-out family' if fold else 'hold-outs'}: not scored ({'; '.join(why)})")
         else:
             lines.append("left-out family (cross-validation; the pre-registered hold-outs not scored):"
                          if self.training_only else "hold-outs (pre-registered, scored once):")
@@ -479,8 +481,8 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
     gate_passed = all(f.gate["passed"] for f in levels) and collision["standard_error"] < 0.5 * collision["efficiency"]
     holdout_errors, coverage_result = None, None
     # --training-only scores no pre-registered hold-out; a cross-validation fold's left-out family alone, if any
-    scored = replace(registry, holdouts=registry.left_out) if training_only else registry
-    if gate_passed and not any(missing.values()) and scored.holdouts:
+    if gate_passed and not any(missing.values()) and (registry.left_out or not training_only):
+        scored = replace(registry, holdouts=registry.left_out) if training_only else registry
         holdout_errors, coverage_result = _score_holdouts(scored, reference_dir, seed, fixed, values, levels,
                                                           band_samples, pool)
     missing[HOLDOUTS_KEY] = _stored(registry.holdouts, reference_dir)[1]  # never scored, whatever the fit
@@ -488,7 +490,7 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
                      holdout_errors=holdout_errors, gate_passed=gate_passed,
                      missing={k: v for k, v in missing.items() if v}, coverage=coverage_result, closures=closures,
                      roof=roof, floor=floor, spread=measured["spread"], stir=measured["stir"],
-                     training_only=training_only)
+                     training_only=training_only, left_out=registry.left_out)
 
 
 def _band_means(target, case_file, fixed, values):
