@@ -343,6 +343,30 @@ def test_settler_calibrate_set_refuses_bad_cross_validation_options(extra, messa
     assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr, done.stderr
 
 
+def test_settler_calibrate_names_a_closure_the_fold_cannot_measure(monkeypatch):
+    """A fold that leaves out the only runs a measured closure rests on (zones_stir without the paper family: the
+    spread core's share, its collision radius and the stirring come from simple and cubic alone) is refused by name
+    as bad input, not reported as an internal error; the measure itself is stubbed here."""
+    import argparse
+
+    import analysis.calibration.command as command
+    from analysis.calibrate import add_arguments
+    from analysis.calibration.zones import MeasureError
+    from settler.output import OutputError
+
+    def refuse(*args, **kwargs):
+        raise MeasureError("no run of demo_cell_25, deep_w002 is spread by the regime rule")
+
+    monkeypatch.setattr(command, "calibrate_set", refuse)
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--set", "data/calibration/holdouts.toml", "--leave-out", "paper", "--training-only",
+                              "--no-profile", "--closures", "zones_stir"])
+    with pytest.raises(OutputError, match="--closures zones_stir with family 'paper' left out: no run of "
+                                          "demo_cell_25, deep_w002 is spread .*allowed: a closure set or fold"):
+        command.run_set(args)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["designed", "zones_core"])
 def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command(tmp_path, name):

@@ -9,6 +9,7 @@ from settler.output import OutputError, atomic_write_text, prepare_output_folder
 from .hierarchy import calibrate_set
 from .layer import write_layer
 from .registry import RegistryError, leave_family_out, load_registry
+from .zones import MeasureError
 
 
 def run_set(args) -> int:
@@ -49,6 +50,10 @@ def run_set(args) -> int:
                                training_only=training_only)
     except (RegistryError, FileNotFoundError) as exc:
         raise OutputError(str(exc)) from None
+    except MeasureError as exc:  # a closure the fit's runs do not carry (a fold that leaves them out)
+        fold = f" with family {leave_out!r} left out" if leave_out else ""
+        raise OutputError(f"--closures {getattr(args, 'closures', 'designed')}{fold}: {exc}; allowed: a closure set "
+                          "or fold whose fitted runs carry every measured closure") from None
     text = result.summary()
     print(text)
     if out is not None:

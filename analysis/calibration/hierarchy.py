@@ -34,7 +34,7 @@ import numpy as np
 from .fit import LevelFit, fit_level
 from .registry import Registry, refuse_holdouts
 from .targets import TARGET_COLUMNS, load_target, seed_scatter
-from .zones import (ROOF_RESOLVED_CELL, collision_radius_from_clustering, dilution_from_zones,
+from .zones import (ROOF_RESOLVED_CELL, MeasureError, collision_radius_from_clustering, dilution_from_zones,
                     dispersion_from_suspension, law_roof_thickness, radius_factor_from_zones, roof_from_zones,
                     roof_kernel_from_collisions, spread_share_from_groups)
 
@@ -372,7 +372,7 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
         fixed["popbal.roof_layer_coefficient"] = roof["coefficient"]
         if CLOSURES[closures].get("drainage"):
             if not math.isfinite(roof["drainage_ratio"]):
-                raise ValueError(f"closures {closures!r} measure the roof's drainage law in the transport runs whose "
+                raise MeasureError(f"closures {closures!r} measure the roof's drainage law in the transport runs whose "
                                  f"cells are at most {ROOF_RESOLVED_CELL * 1e3:.1f} mm; none of "
                                  f"{', '.join(transport_runs) or 'no run'} is")
             fixed.update({"popbal.roof_thickness_form": "drainage",
@@ -459,7 +459,7 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
 
             coalescing = [r for r in runs if load_case(Path(reference_dir) / r / "case.toml").coalescence.enabled]
             if not coalescing:
-                raise ValueError(f"closures {closures!r} measure the bottom layer in the whole level's coalescing runs; "
+                raise MeasureError(f"closures {closures!r} measure the bottom layer in the whole level's coalescing runs; "
                                  f"none of {', '.join(runs) or 'no run'} has coalescence.enabled = true")
             # at the fit's start where the level fits the radii f_b multiplies ('zones_core')
             start = {f"popbal.{n}": START[n] for n in CLOSURES[closures]["levels"]["whole"]

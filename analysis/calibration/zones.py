@@ -12,6 +12,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+
+class MeasureError(ValueError):
+    """A closure that cannot be measured from the runs given (none of them carries it): a cross-validation fold
+    that leaves those runs out, or a registry whose levels lack them. ``settler calibrate`` reports it by name."""
+
+
 #: Largest cell size [m] at which a run's roof layer counts for the drainage law's k: the zone diagnostics count the
 #: roof in slices one cell high, and at 5 mm cells every roof is one or two cells thick (its volume fraction the
 #: cell's: j / (phi_L U_s) 2.8-9.4 against 2.3-2.8 at 3.3 and 2.5 mm cells, docs/guide/reduced-model.md). [chosen]
@@ -82,7 +88,7 @@ def dilution_from_zones(runs, reference_dir: str | Path) -> dict:
             continue
         per_run[run] = (phi, plume_reynolds(u, radius, case.slag.density, case.slag_viscosity))
     if len(per_run) < 3:
-        raise ValueError(f"the dilution law needs the zones of at least 3 runs whose plume is narrower than the inlet; "
+        raise MeasureError(f"the dilution law needs the zones of at least 3 runs whose plume is narrower than the inlet; "
                          f"got {', '.join(per_run) or 'none'} (left out: {excluded or 'none'})")
     phi, reynolds = (np.array(v) for v in zip(*per_run.values()))
     return {**fit_dilution(phi, reynolds), "per_run": {r: (float(a), float(b)) for r, (a, b) in per_run.items()},
@@ -225,7 +231,7 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
     from settler.physics import richardson_zaki_factor
 
     if not runs:
-        raise ValueError("the roof kernel needs at least one run with coalescence and a roof among the whole level's "
+        raise MeasureError("the roof kernel needs at least one run with coalescence and a roof among the whole level's "
                          "stored runs; none is stored")
     per_run = {}
     for run in runs:
@@ -295,7 +301,7 @@ def channel_kernel_from_collisions(runs, reference_dir: str | Path, values: dict
     from settler.cases import NO_CALIBRATION, load_case
 
     if not runs:
-        raise ValueError("the channel kernel needs at least one stored run with coalescence; none was given")
+        raise MeasureError("the channel kernel needs at least one stored run with coalescence; none was given")
     per_run = {}
     for run in runs:
         folder = Path(reference_dir) / run
@@ -349,7 +355,7 @@ def floor_shear_from_collisions(runs, reference_dir: str | Path, values: dict | 
     from settler.cases import NO_CALIBRATION, load_case
 
     if not runs:
-        raise ValueError("the bottom layer's shear needs at least one stored run with its collisions by height; none "
+        raise MeasureError("the bottom layer's shear needs at least one stored run with its collisions by height; none "
                          "was given")
     per_run = {}
     for run in runs:
@@ -392,7 +398,7 @@ def spread_share_from_groups(runs, reference_dir: str | Path, fixed: dict) -> di
         if plume_spreads(case):  # popbal's own rule
             shares[run] = stored_measured_groups(folder)["core_radius"] / column_radius(case)
     if not shares:
-        raise ValueError(f"no run of {', '.join(runs) or 'none'} is spread by the regime rule: the spread core's "
+        raise MeasureError(f"no run of {', '.join(runs) or 'none'} is spread by the regime rule: the spread core's "
                          "share cannot be measured")
     value, se = _geometric_mean_with_error(shares.values())
     return {"value": value, "standard_error": se, "per_run": shares, "runs": list(shares)}
@@ -454,12 +460,12 @@ def collision_radius_from_clustering(runs, reference_dir: str | Path, fixed: dic
     left = (f"; excluded (S <= 1): {', '.join(excluded) or 'none'}; no droplet snapshot: "
             f"{', '.join(unmeasured) or 'none'}")
     if compact is None:
-        raise ValueError(f"no compact run of {', '.join(runs) or 'none'} gives the channel's collision radius (compact "
+        raise MeasureError(f"no compact run of {', '.join(runs) or 'none'} gives the channel's collision radius (compact "
                          f"by the regime rule: {', '.join(r for r in runs if regimes[r] == 'compact') or 'none'}"
                          f"{left})")
     spreading = [r for r in runs if regimes[r] == "spread"]
     if spreading and spread is None:
-        raise ValueError(f"{', '.join(spreading)} spread by the regime rule, and none gives the spread plume's "
+        raise MeasureError(f"{', '.join(spreading)} spread by the regime rule, and none gives the spread plume's "
                          f"collision radius{left}; the compact plume's would stand for it")
     return {"compact": compact, "spread": spread, "with_excluded": pooled("compact", ()), "per_run": per_run,
             "no_snapshot": unmeasured, "excluded": excluded}
@@ -492,7 +498,7 @@ def dispersion_from_suspension(runs, reference_dir: str | Path) -> dict:
         else:
             undetermined.append(run)
     if not inverse:
-        raise ValueError(f"no run of {', '.join(runs) or 'none'} determines the stirring diffusivity (relative "
+        raise MeasureError(f"no run of {', '.join(runs) or 'none'} determines the stirring diffusivity (relative "
                          f"standard error below {DISPERSION_MAX_ERROR:g}): it cannot be measured")
     mean = float(np.average(inverse, weights=weight))
     se_inverse = 1.0 / math.sqrt(float(np.sum(weight)))
