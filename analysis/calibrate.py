@@ -593,7 +593,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "--write")
     parser.add_argument("--no-profile", action="store_true",
                         help="with --set --training-only: no profile-likelihood intervals (the gate checks "
-                             "standard errors and correlations alone; hours sooner)")
+                             "standard errors and correlations alone)")
     parser.add_argument("--closures", default="designed", choices=CLOSURE_NAMES,
                         help="with --set: the closure set fitted: 'designed' (plume, return flow), 'layers' (roof "
                              "law from the zone diagnostics, bottom layer fitted in place of the return flow), 'busy' "

@@ -19,6 +19,11 @@ import pandas as pd
 from settler.output import SNAPSHOT_TABLES, OutputError, read_table
 
 
+class MeasureError(ValueError):
+    """A closure that cannot be measured from the runs given (none of them carries it): a cross-validation fold
+    that leaves those runs out, or a registry whose levels lack them. ``settler calibrate`` reports it by name."""
+
+
 class NoData(LookupError):
     """A figure's inputs are not in the run folder (a missing file, a column that is all NaN, a snapshot without
     droplets); the message is the one-line reason."""

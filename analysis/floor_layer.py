@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .files import read_window_header, window_header
+from .files import MeasureError, read_window_header, window_header
 
 #: Height of the profile's bins [m].
 BIN = 1e-3
@@ -171,12 +171,13 @@ def bottom_factor(runs, reference_dir, values: dict | None = None) -> dict:
     arrive), left out of the mean: their layer is not thin but absent, which f_b R_c cannot say. For coalescing runs
     only: a floor without coalescence fills (docs/guide/reduced-model.md), which is not the layer h_b stands for.
     ValueError naming the run whose file is missing, holds no thickness or one not positive and finite, whose case
-    popbal refuses or gives no channel at ``values``, or when no run has a layer."""
+    popbal refuses or gives no channel at ``values``; MeasureError (a ValueError) when no run has a layer."""
     from popbal.model import channel_closure
     from settler.cases import NO_CALIBRATION, CaseError, load_case
 
     if not runs:
-        raise ValueError("the bottom layer factor needs at least one stored run with its floor layer; none was given")
+        raise MeasureError("the bottom layer factor needs at least one stored run with its floor layer; none was "
+                           "given")
     per_run, no_layer = {}, []
     for run in runs:
         folder = Path(reference_dir) / run
@@ -205,8 +206,8 @@ def bottom_factor(runs, reference_dir, values: dict | None = None) -> dict:
                              "(popbal.channel_radius_factor > 0)")
         per_run[run] = {"thickness": thickness, "channel_radius": radius, "factor": thickness / radius}
     if not per_run:
-        raise ValueError(f"no floor layer in {', '.join(runs)} (floor_layer.csv thickness NaN in each): the bottom "
-                         "layer factor needs at least one run with a layer")
+        raise MeasureError(f"no floor layer in {', '.join(runs)} (floor_layer.csv thickness NaN in each): the "
+                           "bottom layer factor needs at least one run with a layer")
     logs = np.log([v["factor"] for v in per_run.values()])
     sd = float(np.std(logs, ddof=1)) if len(logs) > 1 else math.nan
     value = float(np.exp(logs.mean()))

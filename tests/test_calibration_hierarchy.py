@@ -367,6 +367,53 @@ def test_settler_calibrate_names_a_closure_the_fold_cannot_measure(monkeypatch):
         command.run_set(args)
 
 
+@pytest.mark.parametrize("measure", ["spread_share", "dispersion", "floor"])
+def test_a_closure_no_run_carries_raises_measure_error(measure):
+    """The measures a fold can be left without raise MeasureError (what settler calibrate refuses by name) when no
+    run given carries them, not a bare ValueError (reported as an internal error)."""
+    from analysis.calibration.zones import MeasureError, dispersion_from_suspension, spread_share_from_groups
+    from analysis.floor_layer import bottom_factor
+
+    call = {"spread_share": lambda: spread_share_from_groups([], "data/reference", {}),
+            "dispersion": lambda: dispersion_from_suspension([], "data/reference"),
+            "floor": lambda: bottom_factor([], "data/reference")}[measure]
+    with pytest.raises(MeasureError):
+        call()
+
+
+def test_settler_calibrate_fold_passes_no_profile_and_records_what_it_scored(tmp_path, monkeypatch):
+    """--no-profile reaches the hierarchy as profile=False, and hierarchy.json's 'scored' lists the runs a fold
+    scored (its left-out family), not the registry's hold-outs; the hierarchy itself is stubbed here."""
+    import argparse
+    import json
+
+    import analysis.calibration.command as command
+    from analysis.calibrate import add_arguments
+    from analysis.calibration.hierarchy import Hierarchy
+
+    seen = {}
+
+    def fake(registry, reference_dir, **kwargs):
+        seen.update(kwargs, left_out=registry.left_out)
+        errors = {r: dict.fromkeys(("droplet_count", "mean_diameter", "settling_flux", "channel_velocity"), 0.01)
+                  for r in registry.left_out}
+        return Hierarchy(collision={"efficiency": 0.8, "standard_error": 0.06, "merges": 222,
+                                    "expected_collisions": 278.0},
+                         levels=[], values={}, radius_factor={"value": 6.6, "core_fraction": 0.02, "runs": ["a"]},
+                         holdout_errors=errors, gate_passed=True, training_only=True, left_out=registry.left_out)
+
+    monkeypatch.setattr(command, "calibrate_set", fake)
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--set", "data/calibration/holdouts.toml", "--leave-out", "feed", "--training-only",
+                              "--no-profile", "--quiet", "--out", str(tmp_path / "fold")])
+    assert command.run_set(args) == 0
+    assert seen["profile"] is False and seen["training_only"] is True
+    written = json.loads((tmp_path / "fold" / "hierarchy.json").read_text())
+    assert written["scored"] == ["demo_feed_half_fine", "demo_feed_double_fine"] and written["profile"] is False
+    assert "deep_w003_fine" in written["holdouts"] and "deep_w003_fine" not in written["scored"]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["designed", "zones_core"])
 def test_settler_calibrate_reproduces_the_stored_layer_from_its_recorded_command(tmp_path, name):

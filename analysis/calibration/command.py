@@ -60,7 +60,8 @@ def run_set(args) -> int:
         data = {"closures": result.closures, "roof": result.roof, "floor": result.floor, "leave_out": leave_out,
                 "training_only": training_only, "profile": not no_profile,
                 "holdouts": list(registry.holdouts),
-                "scored": list(registry.left_out if training_only else registry.holdouts), "collision": result.collision, "values": result.values,
+                "scored": list(result.holdout_errors or {}),  # the runs scored: none when the gate failed
+                "collision": result.collision, "values": result.values,
                 "radius_factor": result.radius_factor,
                 "gate_passed": result.gate_passed, "holdout_errors": result.holdout_errors, "missing": result.missing,
                 "coverage": result.coverage,

@@ -372,9 +372,9 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
         fixed["popbal.roof_layer_coefficient"] = roof["coefficient"]
         if CLOSURES[closures].get("drainage"):
             if not math.isfinite(roof["drainage_ratio"]):
-                raise MeasureError(f"closures {closures!r} measure the roof's drainage law in the transport runs whose "
-                                 f"cells are at most {ROOF_RESOLVED_CELL * 1e3:.1f} mm; none of "
-                                 f"{', '.join(transport_runs) or 'no run'} is")
+                raise MeasureError(f"closures {closures!r} measure the roof's drainage law in the transport runs "
+                                   f"whose cells are at most {ROOF_RESOLVED_CELL * 1e3:.1f} mm; none of "
+                                   f"{', '.join(transport_runs) or 'no run'} is")
             fixed.update({"popbal.roof_thickness_form": "drainage",
                           "popbal.roof_drainage_ratio": roof["drainage_ratio"]})
         else:
@@ -459,8 +459,8 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
 
             coalescing = [r for r in runs if load_case(Path(reference_dir) / r / "case.toml").coalescence.enabled]
             if not coalescing:
-                raise MeasureError(f"closures {closures!r} measure the bottom layer in the whole level's coalescing runs; "
-                                 f"none of {', '.join(runs) or 'no run'} has coalescence.enabled = true")
+                raise MeasureError(f"closures {closures!r} measure the bottom layer in the whole level's coalescing "
+                                   f"runs; none of {', '.join(runs) or 'no run'} has coalescence.enabled = true")
             # at the fit's start where the level fits the radii f_b multiplies ('zones_core')
             start = {f"popbal.{n}": START[n] for n in CLOSURES[closures]["levels"]["whole"]
                      if n in ("plume_core_radius", "channel_radius_factor")}

@@ -12,11 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-
-class MeasureError(ValueError):
-    """A closure that cannot be measured from the runs given (none of them carries it): a cross-validation fold
-    that leaves those runs out, or a registry whose levels lack them. ``settler calibrate`` reports it by name."""
-
+from analysis.files import MeasureError
 
 #: Largest cell size [m] at which a run's roof layer counts for the drainage law's k: the zone diagnostics count the
 #: roof in slices one cell high, and at 5 mm cells every roof is one or two cells thick (its volume fraction the
@@ -88,8 +84,8 @@ def dilution_from_zones(runs, reference_dir: str | Path) -> dict:
             continue
         per_run[run] = (phi, plume_reynolds(u, radius, case.slag.density, case.slag_viscosity))
     if len(per_run) < 3:
-        raise MeasureError(f"the dilution law needs the zones of at least 3 runs whose plume is narrower than the inlet; "
-                         f"got {', '.join(per_run) or 'none'} (left out: {excluded or 'none'})")
+        raise MeasureError(f"the dilution law needs the zones of at least 3 runs whose plume is narrower than the "
+                           f"inlet; got {', '.join(per_run) or 'none'} (left out: {excluded or 'none'})")
     phi, reynolds = (np.array(v) for v in zip(*per_run.values()))
     return {**fit_dilution(phi, reynolds), "per_run": {r: (float(a), float(b)) for r, (a, b) in per_run.items()},
             "excluded": excluded, "runs": list(per_run)}
@@ -232,7 +228,7 @@ def roof_kernel_from_collisions(runs, reference_dir: str | Path, thickness: floa
 
     if not runs:
         raise MeasureError("the roof kernel needs at least one run with coalescence and a roof among the whole level's "
-                         "stored runs; none is stored")
+                           "stored runs; none is stored")
     per_run = {}
     for run in runs:
         folder = Path(reference_dir) / run
@@ -356,7 +352,7 @@ def floor_shear_from_collisions(runs, reference_dir: str | Path, values: dict | 
 
     if not runs:
         raise MeasureError("the bottom layer's shear needs at least one stored run with its collisions by height; none "
-                         "was given")
+                           "was given")
     per_run = {}
     for run in runs:
         folder = Path(reference_dir) / run
@@ -399,7 +395,7 @@ def spread_share_from_groups(runs, reference_dir: str | Path, fixed: dict) -> di
             shares[run] = stored_measured_groups(folder)["core_radius"] / column_radius(case)
     if not shares:
         raise MeasureError(f"no run of {', '.join(runs) or 'none'} is spread by the regime rule: the spread core's "
-                         "share cannot be measured")
+                           "share cannot be measured")
     value, se = _geometric_mean_with_error(shares.values())
     return {"value": value, "standard_error": se, "per_run": shares, "runs": list(shares)}
 
@@ -460,13 +456,13 @@ def collision_radius_from_clustering(runs, reference_dir: str | Path, fixed: dic
     left = (f"; excluded (S <= 1): {', '.join(excluded) or 'none'}; no droplet snapshot: "
             f"{', '.join(unmeasured) or 'none'}")
     if compact is None:
-        raise MeasureError(f"no compact run of {', '.join(runs) or 'none'} gives the channel's collision radius (compact "
-                         f"by the regime rule: {', '.join(r for r in runs if regimes[r] == 'compact') or 'none'}"
-                         f"{left})")
+        raise MeasureError(f"no compact run of {', '.join(runs) or 'none'} gives the channel's collision radius "
+                           f"(compact by the regime rule: "
+                           f"{', '.join(r for r in runs if regimes[r] == 'compact') or 'none'}{left})")
     spreading = [r for r in runs if regimes[r] == "spread"]
     if spreading and spread is None:
         raise MeasureError(f"{', '.join(spreading)} spread by the regime rule, and none gives the spread plume's "
-                         f"collision radius{left}; the compact plume's would stand for it")
+                           f"collision radius{left}; the compact plume's would stand for it")
     return {"compact": compact, "spread": spread, "with_excluded": pooled("compact", ()), "per_run": per_run,
             "no_snapshot": unmeasured, "excluded": excluded}
 
@@ -499,7 +495,7 @@ def dispersion_from_suspension(runs, reference_dir: str | Path) -> dict:
             undetermined.append(run)
     if not inverse:
         raise MeasureError(f"no run of {', '.join(runs) or 'none'} determines the stirring diffusivity (relative "
-                         f"standard error below {DISPERSION_MAX_ERROR:g}): it cannot be measured")
+                           f"standard error below {DISPERSION_MAX_ERROR:g}): it cannot be measured")
     mean = float(np.average(inverse, weights=weight))
     se_inverse = 1.0 / math.sqrt(float(np.sum(weight)))
     if len(inverse) > 1:  # the runs scatter more than their own errors say: widen, as settling_fit does
