@@ -474,7 +474,9 @@ if holdout_runs and (fitted_engine is None or fitted_engine != stored_engine):
                                                 f"that of engine fulldem {stored_engine['fulldem'][:7]}")
           + ": its bands are not compared with today's runs (until the layer is refitted to them). Recorded in the "
           f"layer against the runs it was fitted to: band coverage {recorded:.3g}")
-    print(BANDS_CAVEAT.get(bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent), ""))
+    caveat = BANDS_CAVEAT.get(bands_draw_parameters(dprov["code_commit"], DATA_DIR.parent))  # none where it drew them
+    if caveat:
+        print(caveat)
     holdout_runs = []
 elif not holdout_runs:
     print("the layer records no hold-out bands (its gate failed, or it was fitted with --band-samples 0)")
