@@ -90,7 +90,7 @@ SINGULAR_RATIO_LIMIT = 1e-3
 
 #: ``--closures``' sets (calibration.hierarchy.CLOSURES, not imported: the command starts without it; a test holds them)
 CLOSURE_NAMES = ("designed", "layers", "busy", "layers_busy", "zones", "zones_dilution", "zones_floor", "zones_line",
-                 "zones_drain", "zones_core", "zones_stir")
+                 "zones_drain", "zones_core", "zones_stir", "zones_scale")
 
 
 class CalibrationError(ValueError):
@@ -604,7 +604,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "('zones_floor', popbal.plume_law = 'line_force'), 'zones_drain' ('zones_line', roof "
                              "thickness from its drainage law), 'zones_core' ('zones_drain', the slag core "
                              "popbal.plume_core_radius fitted with the channel's factor at the whole level), "
-                             "'zones_stir' ('zones_core', uniform turn, measured stirring and collision radii); "
+                             "'zones_stir' ('zones_core', uniform turn, measured stirring and collision radii), "
+                             "'zones_scale' ('zones_stir', the core grown with the feed Reynolds number); "
                              "analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "

@@ -159,6 +159,24 @@ demo_feed_double_fine and demo_visc_half_fine stand at 0.65999998 against 0.66, 
 ``spread_reference_radius`` L takes the number at a fixed length instead, rho_s Q_ch / (mu L), the 9.5 mm the
 boundary was bracketed at.
 
+The compact core grown with the feed Reynolds number (``plume_core_exponent`` n, ``plume_core_reynolds`` Re_Q,0;
+2026-12-08). One R_0 for every compact plume cannot hold the training runs' axis velocities: zones_stir's fits give
+deep_w005_fine's -38 % at R_0 = 8.3 mm, where its droplets hold half their load within a = 3.0 mm of the axis, and
+the demo's families' a grows from 5.6-8.3 mm at Re_Q = rho_s Q / (mu L) = 0.155 to 21.8-23.6 mm at 0.62 (L = 9.5
+mm; docs/guide/reduced-model.md). With n the compact core is R_s = R_0 (Re_Q / Re_Q,0)^n, Re_Q taken at L =
+``spread_reference_radius``: a power law in the group, its exponent fitted, not derived. Re_Q sets R_s alone, so
+the demo at half its feed and at twice its viscosity (both 0.155) get one core, where their a differ by 1.5 x.
+A probe at n = 0.3, R_0 = 9.5 mm, Re_Q,0 = 0.31 (the other values zones_stir's trial fit's, training runs):
+deep_w005_fine's axis -8 % (count -17 %, its channel now held within the 4.4 mm core), the demo at twice its feed and
+half its viscosity +1 and -4 %, at half its feed +15 %, demo_cell_25 +30 %. The same law gives deep_w002 (deep's
+feed in a 20 mm column) deep_w005_fine's 4.4 mm core and its axis +159 %, where zones_stir's column bound (0.62 R =
+7.0 mm) held it at +3 %: its inlet, 10 mm in a column of equivalent radius 11.3 mm, spans 0.89 of it, and the feed
+settles as a suspension over the column (axis about 1 mm/s) instead of necking into a thread. With
+``plume_fill_inlet_share`` phi_in a compact plume whose inlet radius reaches phi_in R takes the column's bound
+beta R (``plume_core_column_share``) as its core; the training runs bracket the boundary between 0.66 (the demo's
+runs, necked) and 0.89 (deep_w002), and closure set zones_scale takes the midpoint 0.78: a rule from one run on
+one side, as the spread rule's.
+
 Roof layer (``roof_layer_coefficient`` c_L, ``roof_thickness`` delta; zone "roof"). In the full runs about half of
 the demo family's droplets sit in the top 10 mm, under the inlet (data/reference/<run>/zones.csv: the roof layer's
 volume fraction 0.019, 0.029 and 0.044 at 0.5, 1 and 2 times the demo's feed, 0.021 and 0.040 at half and twice the

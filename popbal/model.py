@@ -524,9 +524,11 @@ def channel_efficiency(case: Case, channel_radius: float) -> float:
 
 def core_radius(case: Case, channel_radius: float | None = None) -> float | None:
     """The plume's slag core radius R_s [m] of the confined plume's laws (popbal.closures): popbal.plume_core_radius
-    R_0, or spread_core_share x the column radius R where the feed Reynolds number rho_s Q_ch / (mu R_0) reaches
-    spread_flux_reynolds, and no more than plume_core_column_share x R; without plume_core_radius the channel radius
-    R_c (None when not given). CaseError where the keys do not go together."""
+    R_0 (:func:`compact_core_radius`: with plume_core_exponent, grown with the feed Reynolds number), or
+    spread_core_share x the column radius R where the feed Reynolds number rho_s Q_ch / (mu L) reaches
+    spread_flux_reynolds, or plume_core_column_share x R for a compact plume whose inlet radius reaches
+    plume_fill_inlet_share x R, and no more than plume_core_column_share x R; without plume_core_radius the channel
+    radius R_c (None when not given). CaseError where the keys do not go together."""
     p = case.popbal
     spread = (p.spread_flux_reynolds, p.spread_core_share)
     if p.spread_reference_radius is not None and p.plume_core_radius is None:
@@ -534,7 +536,9 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
                         "rule's feed Reynolds number; allowed only with popbal.plume_core_radius and "
                         "popbal.spread_flux_reynolds (or leave it out)")
     for key, value in (("plume_core_column_share", p.plume_core_column_share),
-                       ("spread_flux_reynolds", p.spread_flux_reynolds), ("spread_core_share", p.spread_core_share)):
+                       ("spread_flux_reynolds", p.spread_flux_reynolds), ("spread_core_share", p.spread_core_share),
+                       ("plume_core_exponent", p.plume_core_exponent), ("plume_core_reynolds", p.plume_core_reynolds),
+                       ("plume_fill_inlet_share", p.plume_fill_inlet_share)):
         if value is not None and p.plume_core_radius is None:
             raise CaseError(f"popbal.{key} = {value!r}: bounds or replaces the slag core popbal.plume_core_radius; "
                             "allowed only with it (or leave it out)")
@@ -545,7 +549,14 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
         return channel_radius
     spreads = plume_spreads(case)  # refuses spread_reference_radius without spread_flux_reynolds
     column = column_radius(case)
-    core = p.spread_core_share * column if spreads else p.plume_core_radius
+    core = p.spread_core_share * column if spreads else compact_core_radius(case)
+    if p.plume_fill_inlet_share is not None and p.plume_core_column_share is None:
+        raise CaseError(f"popbal.plume_fill_inlet_share = {p.plume_fill_inlet_share!r}: a compact plume whose inlet "
+                        "fills the column takes the core popbal.plume_core_column_share x R; allowed only with "
+                        "plume_core_column_share (or leave it out)")
+    if p.plume_fill_inlet_share is not None and not spreads \
+            and 0.5 * case.geometry.inlet_diameter >= p.plume_fill_inlet_share * column:
+        core = p.plume_core_column_share * column  # the feed enters over (nearly) the whole column
     if p.plume_core_column_share is not None:
         core = min(core, p.plume_core_column_share * column)
     if core >= column:
@@ -554,6 +565,28 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
                         "return flow; allowed: a smaller plume_core_radius, plume_core_column_share or "
                         "spread_core_share")
     return core
+
+
+def compact_core_radius(case: Case) -> float:
+    """The compact plume's slag core [m]: popbal.plume_core_radius R_0, or with plume_core_exponent n
+    R_0 (Re_Q / Re_Q,0)^n, Re_Q = rho_s Q_ch / (mu L) the feed Reynolds number at L = spread_reference_radius and
+    Re_Q,0 = plume_core_reynolds (popbal.closures). CaseError where the keys do not go together."""
+    p = case.popbal
+    if (p.plume_core_exponent is None) != (p.plume_core_reynolds is None):
+        raise CaseError(f"popbal.plume_core_exponent = {p.plume_core_exponent!r} with popbal.plume_core_reynolds = "
+                        f"{p.plume_core_reynolds!r}: allowed: both (the compact core's growth with the feed Reynolds "
+                        "number) or neither")
+    if p.plume_core_exponent is None:
+        return p.plume_core_radius
+    if p.plume_core_radius is None or p.spread_reference_radius is None:
+        raise CaseError(f"popbal.plume_core_exponent = {p.plume_core_exponent!r}: the growth of the slag core "
+                        "popbal.plume_core_radius with the feed Reynolds number rho_s Q / (mu L), L = "
+                        "popbal.spread_reference_radius; allowed only with both (or leave it out)")
+    reynolds = closures.feed_reynolds(channel_volume_flux(case), p.spread_reference_radius, case.slag.density,
+                                      case.slag_viscosity)
+    if reynolds <= 0.0:  # no feed: the core at its reference (it carries no load)
+        return p.plume_core_radius
+    return p.plume_core_radius * (reynolds / p.plume_core_reynolds) ** p.plume_core_exponent
 
 
 def channel_volume_flux(case: Case) -> float:

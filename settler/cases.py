@@ -310,6 +310,21 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                                  "plume_core_radius does not move runs across the boundary "
                                                  "(popbal.closures); absent: plume_core_radius.", 0.0,
                                          exclusive_minimum=True, optional=True),
+        "plume_core_exponent": Field(F, "-", "n: with plume_core_radius and spread_reference_radius L, the compact "
+                                             "plume's slag core grows with its feed Reynolds number, R_s = "
+                                             "plume_core_radius (Re_Q / plume_core_reynolds)^n, Re_Q = rho_s Q / "
+                                             "(mu L): the droplets' half-volume radius of the reference runs grows "
+                                             "with it (popbal.closures); absent: one R_s for every compact plume.",
+                                     -2.0, 2.0, optional=True),
+        "plume_core_reynolds": Field(F, "-", "Re_Q,0: the feed Reynolds number at which the compact core is "
+                                             "plume_core_radius (needed with plume_core_exponent).", 0.0,
+                                     exclusive_minimum=True, optional=True),
+        "plume_fill_inlet_share": Field(F, "-", "phi_in: with plume_core_column_share beta, a compact plume whose "
+                                                "inlet radius reaches phi_in times the column's equivalent radius R "
+                                                "fills the column, its slag core beta R: the feed enters over "
+                                                "nearly the whole cross-section and leaves the return flow no room "
+                                                "to neck it (popbal.closures); absent: no such rule.", 0.0,
+                                        exclusive_minimum=True, optional=True),
         "spread_core_share": Field(F, "-", "s: the spread plume's slag core over the column's equivalent radius "
                                            "(needed with spread_flux_reynolds).", 0.0, exclusive_minimum=True,
                                    optional=True),

@@ -616,7 +616,8 @@ def test_cell_efficiency_is_the_kernel_runs_merges_over_its_cell_by_cell_collisi
     assert got["merges"] == 100 and got["expected_collisions"] == 125.0 and got["form"] == "cell"
     assert [name for name, c in CLOSURES.items() if c.get("cell_efficiency")] == ["zones_dilution", "zones_floor",
                                                                                     "zones_line", "zones_drain",
-                                                                                    "zones_core", "zones_stir"]
+                                                                                    "zones_core", "zones_stir",
+                                                                                    "zones_scale"]
 
 
 def test_roof_kernel_from_the_collisions_by_height_of_two_runs(tmp_path):
@@ -1022,7 +1023,7 @@ def test_a_layer_says_whether_its_bands_were_drawn_over_the_parameters():
     assert bands_draw_parameters("0" * 40, root) is None
 
 
-@pytest.mark.parametrize("closures", ["zones_core", "zones_stir"])
+@pytest.mark.parametrize("closures", ["zones_core", "zones_stir", "zones_scale"])
 def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_level_alone(closures, tmp_path,
                                                                                          monkeypatch):
     """'zones_core': no transport level (the plume laws as derived: channel_coefficient and return_flow_ratio 1,
@@ -1056,7 +1057,7 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
         assert start == {n: h.START[n] for n in names}
         return LevelFit(level=level, runs=list(case_files), parameters=names,
                         estimates={"plume_core_radius": 0.01, "channel_radius_factor": 0.45,
-                                   "bottom_turning_share": 0.2},
+                                   "bottom_turning_share": 0.2, "plume_core_exponent": 0.25},
                         standard_errors={n: 0.001 for n in names}, correlation=np.eye(len(names)), discrepancy=0.0,
                         chi2=1.0, residual_count=8, evaluations=3, status="converged", errors={},
                         gate={"passed": True, "reasons": []})
@@ -1095,8 +1096,10 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
     monkeypatch.setattr(h, "fit_level", fit_level)
     result = h.calibrate_set(registry, tmp_path, progress=False, band_samples=0, closures=closures)
     assert list(fixed_at) == ["whole"]
-    fitted = ["plume_core_radius", "channel_radius_factor"] + (["bottom_turning_share"] if closures == "zones_stir"
-                                                               else [])
+    fitted = {"zones_core": ["plume_core_radius", "channel_radius_factor"],
+              "zones_stir": ["plume_core_radius", "channel_radius_factor", "bottom_turning_share"],
+              "zones_scale": ["plume_core_radius", "plume_core_exponent", "channel_radius_factor",
+                              "bottom_turning_share"]}[closures]
     assert [f.parameters for f in result.levels] == [fitted]
     whole = fixed_at["whole"]
     assert not {"popbal.channel_radius_factor", "popbal.plume_core_radius"} & set(whole)
@@ -1115,6 +1118,10 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
         assert popbal["bottom_turning_share"] == 0.06 and "bottom_turning_form" not in popbal
         return
     assert stir_at["popbal.plume_core_radius"] == 0.0095 and stir_at["popbal.channel_radius_factor"] == 0.5
+    if closures == "zones_scale":  # the core's law at its start where the radii are measured, fitted in the layer
+        assert stir_at["popbal.plume_core_exponent"] == 0.3 and stir_at["popbal.plume_core_reynolds"] == 0.31
+        assert whole["popbal.plume_fill_inlet_share"] == 0.78 and "popbal.plume_core_exponent" not in whole
+        assert popbal["plume_core_exponent"] == 0.25 and popbal["plume_fill_inlet_share"] == 0.78
     assert stir_at["popbal.spread_core_share"] == 0.42
     assert {k: whole[f"popbal.{k}"] for k in stirred} == stirred == {k: popbal[k] for k in stirred}
     assert {k: result.values[k][0] for k in stirred} == stirred  # measured: into the bands

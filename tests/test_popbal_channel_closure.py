@@ -211,3 +211,68 @@ def test_the_slag_core_spreads_over_the_column_at_the_feed_reynolds_number_and_i
     assert core_radius(narrow) == pytest.approx(0.62 * math.sqrt(0.02 * 0.02 / math.pi), rel=1e-12)
     wide = load_case("deep", {**base, "popbal.plume_core_column_share": 0.62})
     assert core_radius(wide) == 0.0095
+
+
+def test_the_compact_core_grows_as_a_power_of_the_feed_reynolds_number_and_fills_a_column_its_inlet_spans():
+    """With plume_core_exponent n the compact core is R_0 (Re_Q / Re_Q,0)^n, Re_Q = rho_s Q / (mu L) at L =
+    spread_reference_radius: R_0 at Re_Q,0 by construction (the demo's own Re_Q given), 2^n R_0 at twice the feed and
+    2^-n R_0 at twice the viscosity (Re_Q is linear in Q / mu), the same in deep's 50 and 20 mm columns without the
+    fill rule; with plume_fill_inlet_share 0.78 deep's inlet (10 mm in the 20 mm column, 0.89 R) fills its column
+    (core beta R) while the demo's (37.5 mm in 56.4 mm, 0.66 R) and deep's 50 mm column's (0.35 R) neck; the confined
+    law takes the grown core (u_s by hand)."""
+    from popbal.model import column_radius, core_radius
+
+    n, length = 0.3, 0.0095
+    demo = load_case("demo", {"case.calibration": "none"})
+    re_0 = closures.feed_reynolds(demo.feed.mass_rate / demo.matte.density, length, demo.slag.density,
+                                  demo.slag_viscosity)
+    base = {"case.calibration": "none", "popbal.confinement": True, "popbal.plume_core_radius": 0.0095,
+            "popbal.spread_flux_reynolds": 10.0, "popbal.spread_core_share": 0.4, "popbal.channel_feed_fraction": 1.0,
+            "popbal.spread_reference_radius": length, "popbal.plume_core_exponent": n,
+            "popbal.plume_core_reynolds": re_0, "popbal.plume_core_column_share": 0.62}
+    assert core_radius(load_case("demo", base)) == pytest.approx(0.0095, rel=1e-12)
+    double = load_case("demo", {**base, "feed.mass_rate": 2 * demo.feed.mass_rate})
+    assert core_radius(double) == pytest.approx(0.0095 * 2**n, rel=1e-12)
+    viscous = load_case("demo", {**base, "slag.viscosity_reference": 2 * demo.slag.viscosity_reference})
+    assert viscous.slag_viscosity == pytest.approx(2 * demo.slag_viscosity, rel=1e-12)
+    assert core_radius(viscous) == pytest.approx(0.0095 * 2**-n, rel=1e-12)
+    deep = load_case("deep", {"case.calibration": "none"})
+    deep_re = closures.feed_reynolds(deep.feed.mass_rate / deep.matte.density, length, deep.slag.density,
+                                     deep.slag_viscosity)
+    narrow = {"geometry.width": 0.02, "geometry.depth": 0.02}
+    law = 0.0095 * (deep_re / re_0) ** n
+    assert law < 0.62 * math.sqrt(0.02 * 0.02 / math.pi)  # the column's bound does not reach it
+    for extra in ({}, narrow):
+        assert core_radius(load_case("deep", {**base, **extra})) == pytest.approx(law, rel=1e-12)
+    fill = {**base, "popbal.plume_fill_inlet_share": 0.78}
+    assert core_radius(load_case("deep", {**fill, **narrow})) == pytest.approx(
+        0.62 * math.sqrt(0.02 * 0.02 / math.pi), rel=1e-12)
+    assert core_radius(load_case("deep", fill)) == pytest.approx(law, rel=1e-12)
+    assert core_radius(load_case("demo", fill)) == pytest.approx(0.0095, rel=1e-12)
+    line = load_case("demo", {**fill, "popbal.plume_law": "line_force", "popbal.channel_coefficient": 1.0,
+                              "feed.mass_rate": 2 * demo.feed.mass_rate})
+    q = line.feed.mass_rate / line.matte.density
+    a0 = closures.confined_axis_coefficient(column_radius(line) / (0.0095 * 2**n))
+    assert channel_closure(line)[1] == pytest.approx(math.sqrt(
+        a0 * q * (line.matte.density - line.slag.density) * STANDARD_GRAVITY / (4 * math.pi * line.slag_viscosity)),
+        rel=1e-9)
+
+
+@pytest.mark.parametrize("extra, match", [
+    ({"popbal.plume_core_reynolds": None},
+     "plume_core_exponent = 0.3 with popbal.plume_core_reynolds = None: allowed: both"),
+    ({"popbal.spread_reference_radius": None, "popbal.spread_flux_reynolds": None, "popbal.spread_core_share": None},
+     "plume_core_exponent = 0.3: the growth .* allowed only with both"),
+    ({"popbal.plume_fill_inlet_share": 0.78}, "plume_fill_inlet_share = 0.78: .* allowed only with plume_core_column"),
+    ({"popbal.plume_core_radius": None, "popbal.spread_reference_radius": None, "popbal.spread_flux_reynolds": None,
+      "popbal.spread_core_share": None}, "plume_core_exponent = 0.3: bounds or replaces the slag core")])
+def test_the_core_law_is_refused_without_the_keys_it_needs(extra, match):
+    """Each key of the compact core's law refused by name where what it needs is missing, never ignored."""
+    from settler.errors import CaseError
+
+    overrides = {"case.calibration": "none", "popbal.confinement": True, "popbal.plume_core_radius": 0.0095,
+                 "popbal.spread_flux_reynolds": 0.66, "popbal.spread_core_share": 0.4,
+                 "popbal.spread_reference_radius": 0.0095, "popbal.plume_core_exponent": 0.3,
+                 "popbal.plume_core_reynolds": 0.31, **extra}
+    with pytest.raises(CaseError, match=match):
+        channel_closure(load_case("demo", {k: v for k, v in overrides.items() if v is not None}))

@@ -82,6 +82,16 @@ CORE = {"popbal.confinement": True, "popbal.plume_law": "line_force", "popbal.ch
 #: takes the number at the 9.5 mm the boundary was bracketed at (popbal.spread_reference_radius).
 STIR = {**{k: v for k, v in CORE.items() if k != "popbal.bottom_turning_share"},
         "popbal.bottom_turning_form": "uniform", "popbal.spread_reference_radius": 0.0095}
+#: 'zones_scale' (added 2026-12-08, before any fit of it and with the second registration's blind hold-outs not run
+#: through popbal): 'zones_stir' with the compact slag core grown with the feed Reynolds number, R_s = R_0 (Re_Q /
+#: 0.31)^n (popbal.plume_core_exponent n fitted with R_0; 0.31 is demo_cell_25's Re_Q, the middle of the demo's
+#: families in log), where 'zones_stir' gives every compact plume one R_0: the training runs' droplets hold half
+#: their load within 3.0 mm at Re_Q = 0.025 (deep_w005_fine) and 5.6-23.6 mm at 0.155-0.62 (the demo's families),
+#: and zones_stir's fits missed deep_w005_fine's axis velocity by -38 % (docs/guide/reduced-model.md). A compact
+#: plume whose inlet radius reaches 0.78 of the column's equivalent radius takes the column's bound as its core
+#: (popbal.plume_fill_inlet_share): deep_w002 (0.89), whose feed fills its 20 mm column and whose axis the bound held
+#: in zones_stir, where the law would give it deep_w005_fine's core (same feed); the demo's runs, at 0.66, neck.
+SCALE = {**STIR, "popbal.plume_core_reynolds": 0.31, "popbal.plume_fill_inlet_share": 0.78}
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers": {"levels": LAYER_LEVELS, "layers": True},
             "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": BUSY},
@@ -107,7 +117,12 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "zones_stir": {"levels": {"whole": ("plume_core_radius", "channel_radius_factor", "bottom_turning_share")},
                            "layers": True, "switches": STIR, "form": {"popbal.channel_radius_form": "inlet"},
                            "roof_kernel": True, "cell_efficiency": True, "floor": True, "drainage": True,
-                           "spread": True, "stir": True}}
+                           "spread": True, "stir": True},
+            "zones_scale": {"levels": {"whole": ("plume_core_radius", "plume_core_exponent", "channel_radius_factor",
+                                                 "bottom_turning_share")},
+                            "layers": True, "switches": SCALE, "form": {"popbal.channel_radius_form": "inlet"},
+                            "roof_kernel": True, "cell_efficiency": True, "floor": True, "drainage": True,
+                            "spread": True, "stir": True}}
 #: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
 #: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
 #: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
@@ -159,12 +174,19 @@ SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time
                                                   "training runs across it (popbal.closures)",
                 "popbal.plume_core_column_share": "the slag core's bound in a narrow column: deep's feed in its "
                                                   "20 mm column holds its axis at 0.62 (probe, training runs)",
+                "popbal.plume_core_reynolds": "the feed Reynolds number at which the compact core is R_0: "
+                                              "demo_cell_25's 0.31, the middle of the demo's families in log "
+                                              "(chosen, so that R_0 and the exponent are not tied)",
+                "popbal.plume_fill_inlet_share": "a compact plume whose inlet reaches this share of the column "
+                                                 "fills it (core beta R): between the demo's runs (0.66, necked) "
+                                                 "and deep_w002 (0.89, its feed filling its 20 mm column); the "
+                                                 "midpoint",
                 "popbal.spread_flux_reynolds": "the regime boundary: compact at rho_s Q / (mu R_0) = 0.62 "
                                                "(demo_feed_double_fine, demo_visc_half_fine), spread at 0.70 "
                                                "(demo_wide_33) and above, R_0 = 9.5 mm; the midpoint"}
 START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
          "bottom_layer_factor": 1.0, "plume_core_radius": 0.0095, "channel_radius_factor": 0.5,
-         "bottom_turning_share": 0.15}
+         "bottom_turning_share": 0.15, "plume_core_exponent": 0.3}
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
 FORM = {"popbal.channel_radius_form": "flux"}
 #: Key of :attr:`Hierarchy.missing` for the registered hold-outs not stored (not a level: they do not stop the others
@@ -402,7 +424,8 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
     if CLOSURES[closures].get("stir"):  # the whole runs' snapshots, at the fit's start radii
         whole_runs = _stored(registry.levels.get("whole", ()), reference_dir)[0]
         refuse_holdouts(whole_runs, registry, "the channel's collision radius and the stirring")
-        start = {f"popbal.{n}": START[n] for n in ("plume_core_radius", "channel_radius_factor")}
+        start = {f"popbal.{n}": START[n] for n in ("plume_core_radius", "plume_core_exponent", "channel_radius_factor")
+                 if n in CLOSURES[closures]["levels"]["whole"]}
         stir = {"radius": collision_radius_from_clustering(whole_runs, reference_dir, {**fixed, **start}),
                 "dispersion": dispersion_from_suspension(whole_runs, reference_dir)}
         measured = [("channel_collision_radius", stir["radius"]["compact"]),
@@ -463,7 +486,7 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
                                    f"runs; none of {', '.join(runs) or 'no run'} has coalescence.enabled = true")
             # at the fit's start where the level fits the radii f_b multiplies ('zones_core')
             start = {f"popbal.{n}": START[n] for n in CLOSURES[closures]["levels"]["whole"]
-                     if n in ("plume_core_radius", "channel_radius_factor")}
+                     if n in ("plume_core_radius", "plume_core_exponent", "channel_radius_factor")}
             floor = bottom_factor(coalescing, reference_dir, {**start, **fixed})
             fixed["popbal.bottom_layer_factor"] = floor["value"]
             values["bottom_layer_factor"] = (floor["value"], floor["standard_error"])  # measured: into the bands

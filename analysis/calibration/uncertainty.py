@@ -25,6 +25,7 @@ PARAMETERS: dict[str, tuple[float, float, str]] = {
     "bottom_layer_factor": (0.05, 20.0, "-"),
     "plume_core_radius": (2e-3, 0.05, "m"),
     "bottom_turning_share": (1e-3, 0.95, "-"),
+    "plume_core_exponent": (-1.0, 1.5, "-"),
     "channel_collision_radius": (1e-3, 0.1, "m"),
     "spread_channel_collision_radius": (1e-3, 0.1, "m"),
     "outer_dispersion": (0.0, 1e-2, "m^2/s"),
