@@ -84,14 +84,19 @@ STIR = {**{k: v for k, v in CORE.items() if k != "popbal.bottom_turning_share"},
         "popbal.bottom_turning_form": "uniform", "popbal.spread_reference_radius": 0.0095}
 #: 'zones_scale' (added 2026-12-08, before any fit of it and with the second registration's blind hold-outs not run
 #: through popbal): 'zones_stir' with the compact slag core grown with the feed Reynolds number, R_s = R_0 (Re_Q /
-#: 0.31)^n (popbal.plume_core_exponent n fitted with R_0; 0.31 is demo_cell_25's Re_Q, the middle of the demo's
-#: families in log), where 'zones_stir' gives every compact plume one R_0: the training runs' droplets hold half
+#: Re_Q,0)^n (popbal.plume_core_exponent n fitted with R_0, Re_Q,0 below), where 'zones_stir' gives every compact plume one R_0: the training runs' droplets hold half
 #: their load within 3.0 mm at Re_Q = 0.025 (deep_w005_fine) and 5.6-23.6 mm at 0.155-0.62 (the demo's families),
 #: and zones_stir's fits missed deep_w005_fine's axis velocity by -38 % (docs/guide/reduced-model.md). A compact
 #: plume whose inlet radius reaches 0.78 of the column's equivalent radius takes the column's bound as its core
 #: (popbal.plume_fill_inlet_share): deep_w002 (0.89), whose feed fills its 20 mm column and whose axis the bound held
 #: in zones_stir, where the law would give it deep_w005_fine's core (same feed); the demo's runs, at 0.66, neck.
-SCALE = {**STIR, "popbal.plume_core_reynolds": 0.31, "popbal.plume_fill_inlet_share": 0.78}
+#: The reference Re_Q,0 is deep_w005_fine's 0.025 (changed from the demo's 0.31 on 2026-12-08 after the set's first
+#: training-only fit, where R_0 and n correlated +0.938, past the gate's 0.9: the training runs fix the core near
+#: Re_Q = 0.03, where deep_w005_fine stands; the same fit at 0.025 by the chain rule: -0.33). Its start R_0 is the
+#: core that 9.5 mm at 0.31 and n = 0.3 give there, so that the floor factor and the collision radii, measured at the
+#: start, are measured where they were in that fit.
+SCALE = {**STIR, "popbal.plume_core_reynolds": 0.025, "popbal.plume_fill_inlet_share": 0.78}
+SCALE_START = {"plume_core_radius": round(0.0095 * (0.025 / 0.31) ** 0.3, 6)}
 CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
             "layers": {"levels": LAYER_LEVELS, "layers": True},
             "busy": {"levels": LEVEL_PARAMETERS, "layers": False, "switches": BUSY},
@@ -122,7 +127,7 @@ CLOSURES = {"designed": {"levels": LEVEL_PARAMETERS, "layers": False},
                                                  "bottom_turning_share")},
                             "layers": True, "switches": SCALE, "form": {"popbal.channel_radius_form": "inlet"},
                             "roof_kernel": True, "cell_efficiency": True, "floor": True, "drainage": True,
-                            "spread": True, "stir": True}}
+                            "spread": True, "stir": True, "start": SCALE_START}}
 #: 'zones_dilution' is 'zones' with the plume's volume fraction diluted by its Reynolds number
 #: (popbal.plume_dilution_reynolds): k_R and Re_d from the zone diagnostics of the transport and whole levels' runs
 #: (:func:`dilution_from_zones`), not fitted to their window means, where the other sets take k_R from the
@@ -175,8 +180,8 @@ SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time
                 "popbal.plume_core_column_share": "the slag core's bound in a narrow column: deep's feed in its "
                                                   "20 mm column holds its axis at 0.62 (probe, training runs)",
                 "popbal.plume_core_reynolds": "the feed Reynolds number at which the compact core is R_0: "
-                                              "demo_cell_25's 0.31, the middle of the demo's families in log "
-                                              "(chosen, so that R_0 and the exponent are not tied)",
+                                              "deep_w005_fine's 0.025, near where the training runs fix the core "
+                                              "(at the demo's 0.31 R_0 and n correlated +0.94)",
                 "popbal.plume_fill_inlet_share": "a compact plume whose inlet reaches this share of the column "
                                                  "fills it (core beta R): between the demo's runs (0.66, necked) "
                                                  "and deep_w002 (0.89, its feed filling its 20 mm column); the "
@@ -187,6 +192,14 @@ SWITCH_NOTES = {"popbal.busy_partners": "the full engine's one-partner-at-a-time
 START = {"channel_coefficient": 0.4, "plume_reynolds_scale": 1.0, "return_flow_ratio": 0.05, "shear_coefficient": 1.0,
          "bottom_layer_factor": 1.0, "plume_core_radius": 0.0095, "channel_radius_factor": 0.5,
          "bottom_turning_share": 0.15, "plume_core_exponent": 0.3}
+
+
+def start_values(closures: str) -> dict:
+    """The fit's start values under closure set ``closures``: :data:`START` with the set's own ("start" in
+    :data:`CLOSURES`), which are also where the floor factor, the collision radii and the spread share are measured."""
+    return {**START, **CLOSURES[closures].get("start", {})}
+
+
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
 FORM = {"popbal.channel_radius_form": "flux"}
 #: Key of :attr:`Hierarchy.missing` for the registered hold-outs not stored (not a level: they do not stop the others
@@ -418,13 +431,14 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
         whole_runs = _stored(registry.levels.get("whole", ()), reference_dir)[0]
         refuse_holdouts(whole_runs, registry, "the spread plume's core")
         spread = spread_share_from_groups(whole_runs, reference_dir, {**fixed, "popbal.plume_core_radius":
-                                                                      START["plume_core_radius"]})
+                                                                      start_values(closures)["plume_core_radius"]})
         fixed["popbal.spread_core_share"] = spread["value"]
     stir = None
     if CLOSURES[closures].get("stir"):  # the whole runs' snapshots, at the fit's start radii
         whole_runs = _stored(registry.levels.get("whole", ()), reference_dir)[0]
         refuse_holdouts(whole_runs, registry, "the channel's collision radius and the stirring")
-        start = {f"popbal.{n}": START[n] for n in ("plume_core_radius", "plume_core_exponent", "channel_radius_factor")
+        start = {f"popbal.{n}": start_values(closures)[n] for n in ("plume_core_radius", "plume_core_exponent",
+                                                                     "channel_radius_factor")
                  if n in CLOSURES[closures]["levels"]["whole"]}
         stir = {"radius": collision_radius_from_clustering(whole_runs, reference_dir, {**fixed, **start}),
                 "dispersion": dispersion_from_suspension(whole_runs, reference_dir)}
@@ -485,7 +499,7 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
                 raise MeasureError(f"closures {closures!r} measure the bottom layer in the whole level's coalescing "
                                    f"runs; none of {', '.join(runs) or 'no run'} has coalescence.enabled = true")
             # at the fit's start where the level fits the radii f_b multiplies ('zones_core')
-            start = {f"popbal.{n}": START[n] for n in CLOSURES[closures]["levels"]["whole"]
+            start = {f"popbal.{n}": start_values(closures)[n] for n in CLOSURES[closures]["levels"]["whole"]
                      if n in ("plume_core_radius", "plume_core_exponent", "channel_radius_factor")}
             floor = bottom_factor(coalescing, reference_dir, {**start, **fixed})
             fixed["popbal.bottom_layer_factor"] = floor["value"]
@@ -494,7 +508,7 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
         case_files = {r: Path(reference_dir) / r / "case.toml" for r in runs}
         parameters = CLOSURES[closures]["levels"][level]
         columns = CLOSURES[closures].get("columns", {}).get(level, tuple(TARGET_COLUMNS))
-        fit = fit_level(level, targets, case_files, parameters, {p: START[p] for p in parameters}, fixed,
+        fit = fit_level(level, targets, case_files, parameters, {p: start_values(closures)[p] for p in parameters}, fixed,
                         columns=columns, max_evaluations=max_evaluations, profile=profile, progress=progress,
                         pool=pool)
         levels.append(fit)

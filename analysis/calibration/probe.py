@@ -15,7 +15,8 @@ from a hold-out. Keys a coalescence-off run's case refuses without a bottom laye
 turning share) are left out for those runs, as the hierarchy's transport level has no bottom layer. What a set fits
 is not measured and needs ``--set``: under ``zones_core`` popbal.plume_core_radius, channel_radius_factor and
 bottom_layer_factor (measured at the fit's radii); under ``zones_stir`` also bottom_turning_share (its form is the
-set's, 'uniform'), while the channel's collision radii and the outer stirring come measured.
+set's, 'uniform'), while the channel's collision radii and the outer stirring come measured; under ``zones_scale``
+also popbal.plume_core_exponent.
 
 ``--bands`` adds, per run, where each model holds its matte and where it merges, band by band
 (:func:`zone_bands`): the full run's plume core and return flow (``plume_zones.csv``) and merges under the inlet and
