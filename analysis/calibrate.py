@@ -605,7 +605,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "thickness from its drainage law), 'zones_core' ('zones_drain', the slag core "
                              "popbal.plume_core_radius fitted with the channel's factor at the whole level), "
                              "'zones_stir' ('zones_core', uniform turn, measured stirring and collision radii), "
-                             "'zones_scale' ('zones_stir', the core grown with the feed Reynolds number); "
+                             "'zones_scale' ('zones_stir', the core grown with the feed Reynolds number, a plume "
+                             "whose inlet spans most of its column given the column's bound); "
                              "analysis.calibration.hierarchy.CLOSURES; default designed")
     parser.add_argument("--band-samples", type=int, default=20, metavar="N",
                         help="with --set: popbal runs per hold-out for its 90 %% prediction band (default 20; 0: "

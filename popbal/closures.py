@@ -176,7 +176,7 @@ settles as a suspension over the column (axis about 1 mm/s) instead of necking i
 beta R (``plume_core_column_share``) as its core; the training runs bracket the boundary between 0.66 (the demo's
 runs, necked) and 0.89 (deep_w002), and closure set zones_scale takes the midpoint 0.78: a rule from one run on
 one side, as the spread rule's. zones_scale's training-only fit (Re_Q,0 = 0.31; 49 model runs): R_0 = 10.2 mm, n =
-0.291 +- 0.036, 28 of 36 window means within 10 %, deep_w005_fine within 6 % in all four, discrepancy 0.060 against
+0.291 +- 0.036, 27 of 36 window means within 10 %, deep_w005_fine within 6 % in all four, discrepancy 0.060 against
 zones_stir's 0.092; R_0 and n correlated +0.938, so the set now takes Re_Q,0 = 0.025, where the fit puts R_0 = 4.91
 +- 0.15 mm (the same fit by the chain rule; docs/guide/reduced-model.md).
 

@@ -549,7 +549,8 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
         return channel_radius
     spreads = plume_spreads(case)  # refuses spread_reference_radius without spread_flux_reynolds
     column = column_radius(case)
-    core = p.spread_core_share * column if spreads else compact_core_radius(case)
+    compact = compact_core_radius(case)  # checks the law's keys whatever the regime
+    core = p.spread_core_share * column if spreads else compact
     if p.plume_fill_inlet_share is not None and p.plume_core_column_share is None:
         raise CaseError(f"popbal.plume_fill_inlet_share = {p.plume_fill_inlet_share!r}: a compact plume whose inlet "
                         "fills the column takes the core popbal.plume_core_column_share x R; allowed only with "
@@ -563,7 +564,8 @@ def core_radius(case: Case, channel_radius: float | None = None) -> float | None
         raise CaseError(f"popbal.plume_core_radius = {p.plume_core_radius!r} m: the slag core ({core:.4g} m) must be "
                         f"narrower than the column's equivalent radius {column:.4g} m, where the confined plume has a "
                         "return flow; allowed: a smaller plume_core_radius, plume_core_column_share or "
-                        "spread_core_share")
+                        "spread_core_share" + (", or a law (plume_core_exponent, plume_core_reynolds) that keeps "
+                                               "the core narrower" if p.plume_core_exponent is not None else ""))
     return core
 
 
@@ -581,7 +583,8 @@ def compact_core_radius(case: Case) -> float:
     if p.plume_core_radius is None or p.spread_reference_radius is None:
         raise CaseError(f"popbal.plume_core_exponent = {p.plume_core_exponent!r}: the growth of the slag core "
                         "popbal.plume_core_radius with the feed Reynolds number rho_s Q / (mu L), L = "
-                        "popbal.spread_reference_radius; allowed only with both (or leave it out)")
+                        "popbal.spread_reference_radius (which needs spread_flux_reynolds and spread_core_share); "
+                        "allowed only with both (or leave it out)")
     reynolds = closures.feed_reynolds(channel_volume_flux(case), p.spread_reference_radius, case.slag.density,
                                       case.slag_viscosity)
     if reynolds <= 0.0:  # no feed: the core at its reference (it carries no load)

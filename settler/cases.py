@@ -308,13 +308,15 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "spread_reference_radius": Field(F, "m", "With spread_flux_reynolds: the length at which the regime's feed "
                                                  "Reynolds number rho_s Q / (mu L) is taken, so that a fit of "
                                                  "plume_core_radius does not move runs across the boundary "
-                                                 "(popbal.closures); absent: plume_core_radius.", 0.0,
+                                                 "(popbal.closures), and that of plume_core_exponent's law; absent: "
+                                                 "plume_core_radius.", 0.0,
                                          exclusive_minimum=True, optional=True),
         "plume_core_exponent": Field(F, "-", "n: with plume_core_radius and spread_reference_radius L, the compact "
                                              "plume's slag core grows with its feed Reynolds number, R_s = "
                                              "plume_core_radius (Re_Q / plume_core_reynolds)^n, Re_Q = rho_s Q / "
                                              "(mu L): the droplets' half-volume radius of the reference runs grows "
-                                             "with it (popbal.closures); absent: one R_s for every compact plume.",
+                                             "with it (popbal.closures; L needs the spread rule's keys too); "
+                                             "absent: one R_s for every compact plume.",
                                      -2.0, 2.0, optional=True),
         "plume_core_reynolds": Field(F, "-", "Re_Q,0: the feed Reynolds number at which the compact core is "
                                              "plume_core_radius (needed with plume_core_exponent).", 0.0,
@@ -323,7 +325,7 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                                 "inlet radius reaches phi_in times the column's equivalent radius R "
                                                 "fills the column, its slag core beta R: the feed enters over "
                                                 "nearly the whole cross-section and leaves the return flow no room "
-                                                "to neck it (popbal.closures); absent: no such rule.", 0.0,
+                                                "to neck it (popbal.closures); absent: no such rule.", 0.0, 1.0,
                                         exclusive_minimum=True, optional=True),
         "spread_core_share": Field(F, "-", "s: the spread plume's slag core over the column's equivalent radius "
                                            "(needed with spread_flux_reynolds).", 0.0, exclusive_minimum=True,

@@ -1118,13 +1118,14 @@ def test_zones_core_fits_the_slag_core_and_the_droplets_channel_at_the_whole_lev
         assert not stir_at and result.stir is None and not set(stirred) & set(popbal)
         assert popbal["bottom_turning_share"] == 0.06 and "bottom_turning_form" not in popbal
         return
-    core_start = 0.0095 if closures != "zones_scale" else pytest.approx(0.0095 * (0.025 / 0.31) ** 0.3, rel=1e-4)
+    core_start = 0.0095 if closures != "zones_scale" else 0.004464  # 9.5 mm at Re_Q 0.31 carried to 0.025, n 0.3
     assert stir_at["popbal.plume_core_radius"] == core_start and stir_at["popbal.channel_radius_factor"] == 0.5
     if closures == "zones_scale":  # the core's law at its start where the radii are measured, fitted in the layer
         assert stir_at["popbal.plume_core_exponent"] == 0.3 and stir_at["popbal.plume_core_reynolds"] == 0.025
         assert h.start_values("zones_scale")["plume_core_radius"] == stir_at["popbal.plume_core_radius"]
         assert whole["popbal.plume_fill_inlet_share"] == 0.78 and "popbal.plume_core_exponent" not in whole
         assert popbal["plume_core_exponent"] == 0.25 and popbal["plume_fill_inlet_share"] == 0.78
+        assert popbal["plume_core_reynolds"] == 0.025
     assert stir_at["popbal.spread_core_share"] == 0.42
     assert {k: whole[f"popbal.{k}"] for k in stirred} == stirred == {k: popbal[k] for k in stirred}
     assert {k: result.values[k][0] for k in stirred} == stirred  # measured: into the bands

@@ -258,6 +258,25 @@ def test_the_compact_core_grows_as_a_power_of_the_feed_reynolds_number_and_fills
         rel=1e-9)
 
 
+def test_a_spread_plume_ignores_the_compact_law_but_its_keys_are_still_checked():
+    """A plume the regime rule spreads (the demo at four times its feed: Re_Q 1.24 against the boundary 0.66) takes
+    spread_core_share x R whatever the compact law and the fill rule say; the law's keys are refused as for a compact
+    plume (not silently accepted because the law is not used)."""
+    from popbal.model import column_radius, core_radius
+    from settler.errors import CaseError
+
+    demo = load_case("demo", {"case.calibration": "none"})
+    overrides = {"case.calibration": "none", "popbal.confinement": True, "popbal.plume_core_radius": 0.0095,
+                 "popbal.spread_flux_reynolds": 0.66, "popbal.spread_core_share": 0.4,
+                 "popbal.spread_reference_radius": 0.0095, "popbal.plume_core_exponent": 0.3,
+                 "popbal.plume_core_reynolds": 0.025, "popbal.plume_core_column_share": 0.9,
+                 "popbal.plume_fill_inlet_share": 0.5, "feed.mass_rate": 4 * demo.feed.mass_rate}
+    fast = load_case("demo", overrides)
+    assert core_radius(fast) == pytest.approx(0.4 * column_radius(fast), rel=1e-12)
+    with pytest.raises(CaseError, match="plume_core_exponent = 0.3 with popbal.plume_core_reynolds = None"):
+        core_radius(load_case("demo", {k: v for k, v in overrides.items() if k != "popbal.plume_core_reynolds"}))
+
+
 @pytest.mark.parametrize("extra, match", [
     ({"popbal.plume_core_reynolds": None},
      "plume_core_exponent = 0.3 with popbal.plume_core_reynolds = None: allowed: both"),

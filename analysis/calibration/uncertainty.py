@@ -8,7 +8,9 @@ import numpy as np
 #: Fittable [popbal] keys, and those a closure set measures before its fit and the bands draw (the collision radii,
 #: outer_dispersion): name -> (lower bound, upper bound, unit). Bounds [chosen]: physical (>= 0, a fraction <= 1) and
 #: wide enough that an estimate on a bound says the data push beyond what the form allows; the channel must fit in
-#: the 0.2 m boxes (R_c < 0.113 m = 1.5 inlet radii of the simple and cubic cases).
+#: the 0.2 m boxes (R_c < 0.113 m = 1.5 inlet radii of the simple and cubic cases). The core's exponent may be
+#: negative; near 0 its relative standard error, which the gate takes, and its relative step say little (a caveat
+#: for a fit that puts it there).
 PARAMETERS: dict[str, tuple[float, float, str]] = {
     "collision_efficiency": (1e-3, 100.0, "-"),
     "channel_coefficient": (1e-3, 3.0, "-"),
