@@ -111,7 +111,11 @@ def test_installed_commands_find_the_presets(installed):
     assert version.returncode == 0 and version.stdout.startswith("settler "), version.stderr
 
 
+@pytest.mark.slow
 def test_installed_full_run(installed):
+    """The installed copy runs the full engine (`settler full demo`). Under ``-m slow``: Numba compiles the engine
+    again in the installed copy, about 130 s on CI's 2 cores; the default run keeps the installed commands and data
+    (above), and every fulldem test runs the same engine from the checkout."""
     env, bindir, work, _ = installed
     out = work / "out"
     run = _run([bindir / "settler", "full", "demo", "--out", out, "--end-time", "0.01", "--quiet"], cwd=work, env=env,
