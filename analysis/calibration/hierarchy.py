@@ -203,6 +203,17 @@ def start_values(closures: str) -> dict:
     return {**START, **CLOSURES[closures].get("start", {})}
 
 
+#: The whole level's fitted keys that set the plume's radii, at whose start values the floor factor and the
+#: collision radii are measured.
+RADIUS_KEYS = ("plume_core_radius", "plume_core_exponent", "channel_radius_factor")
+
+
+def start_radii(closures: str) -> dict:
+    """{dotted [popbal] key: start value} of the :data:`RADIUS_KEYS` the set's whole level fits."""
+    start = start_values(closures)
+    return {f"popbal.{n}": start[n] for n in RADIUS_KEYS if n in CLOSURES[closures]["levels"].get("whole", ())}
+
+
 #: The closure form every level uses (the flux form: the plume radius from continuity, not the inlet).
 FORM = {"popbal.channel_radius_form": "flux"}
 #: Key of :attr:`Hierarchy.missing` for the registered hold-outs not stored (not a level: they do not stop the others
@@ -440,10 +451,8 @@ def measured_closures(registry: Registry, reference_dir: str | Path = "data/refe
     if CLOSURES[closures].get("stir"):  # the whole runs' snapshots, at the fit's start radii
         whole_runs = _stored(registry.levels.get("whole", ()), reference_dir)[0]
         refuse_holdouts(whole_runs, registry, "the channel's collision radius and the stirring")
-        start = {f"popbal.{n}": start_values(closures)[n] for n in ("plume_core_radius", "plume_core_exponent",
-                                                                     "channel_radius_factor")
-                 if n in CLOSURES[closures]["levels"]["whole"]}
-        stir = {"radius": collision_radius_from_clustering(whole_runs, reference_dir, {**fixed, **start}),
+        radii = collision_radius_from_clustering(whole_runs, reference_dir, {**fixed, **start_radii(closures)})
+        stir = {"radius": radii,
                 "dispersion": dispersion_from_suspension(whole_runs, reference_dir)}
         measured = [("channel_collision_radius", stir["radius"]["compact"]),
                     ("spread_channel_collision_radius", stir["radius"]["spread"]),
@@ -502,17 +511,15 @@ def _calibrate_set(registry, reference_dir, max_evaluations, profile, progress, 
                 raise MeasureError(f"closures {closures!r} measure the bottom layer in the whole level's coalescing "
                                    f"runs; none of {', '.join(runs) or 'no run'} has coalescence.enabled = true")
             # at the fit's start where the level fits the radii f_b multiplies ('zones_core')
-            start = {f"popbal.{n}": start_values(closures)[n] for n in CLOSURES[closures]["levels"]["whole"]
-                     if n in ("plume_core_radius", "plume_core_exponent", "channel_radius_factor")}
-            floor = bottom_factor(coalescing, reference_dir, {**start, **fixed})
+            floor = bottom_factor(coalescing, reference_dir, {**start_radii(closures), **fixed})
             fixed["popbal.bottom_layer_factor"] = floor["value"]
             values["bottom_layer_factor"] = (floor["value"], floor["standard_error"])  # measured: into the bands
         targets = [load_target(r, reference_dir, seed) for r in runs]
         case_files = {r: Path(reference_dir) / r / "case.toml" for r in runs}
         parameters = CLOSURES[closures]["levels"][level]
         columns = CLOSURES[closures].get("columns", {}).get(level, tuple(TARGET_COLUMNS))
-        fit = fit_level(level, targets, case_files, parameters, {p: start_values(closures)[p] for p in parameters},
-                        fixed,
+        start = start_values(closures)
+        fit = fit_level(level, targets, case_files, parameters, {p: start[p] for p in parameters}, fixed,
                         columns=columns, max_evaluations=max_evaluations, profile=profile, progress=progress,
                         pool=pool)
         levels.append(fit)
